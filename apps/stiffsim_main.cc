@@ -1,0 +1,427 @@
+// The stiffsim command line: parse, load, run, write (DESIGN.md section 8).
+// Everything substantial lives in the libraries; this file only wires them
+// together and turns failures into messages and exit codes.
+
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiffsim/error.h"
+#include "stiffsim/integrators/integrator_factory.h"
+#include "stiffsim/integrators/simulator.h"
+#include "stiffsim/io/scene_yaml.h"
+#include "stiffsim/io/stats_writer.h"
+#include "stiffsim/io/trajectory_writer.h"
+#include "stiffsim/io/vtk_writer.h"
+
+namespace stiffsim {
+namespace {
+
+constexpr int kUsageExitCode = 2;  // same as InputError: the user's input is wrong
+
+std::string join(const std::vector<std::string>& items, const std::string& separator) {
+  std::string out;
+  for (size_t i = 0; i < items.size(); ++i) out += (i > 0 ? separator : "") + items[i];
+  return out;
+}
+
+// CLI11 accepts "inf" and "nan" as doubles; none of our options means them.
+CLI::Validator number_check(const std::string& name, bool allow_zero, bool at_most_one) {
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        double value = 0.0;
+        if (!CLI::detail::lexical_cast(text, value) || !std::isfinite(value)) {
+          return "expected a finite number, got '" + text + "'";
+        }
+        if (value < 0.0 || (!allow_zero && value == 0.0)) {
+          return std::string("expected a ") + (allow_zero ? "non-negative" : "positive") +
+                 " number, got " + text;
+        }
+        if (at_most_one && value > 1.0) return "expected a number in (0, 1], got " + text;
+        return std::string();
+      },
+      name);
+}
+
+struct RunOptions {
+  std::string scene;
+  std::string integrator;
+  double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
+  bool fixed_step = false, error_estimate = false;
+  std::string jacobian, linear_solver, newton_form;
+  bool full_newton = false, no_reuse = false;
+  std::string output, stats, vtk;
+  std::vector<std::string> sets;
+  bool quiet = false, summary = false;
+  // Options that override the scene only when given.
+  CLI::Option *integrator_option = nullptr, *t_final_option = nullptr, *step_option = nullptr,
+              *accuracy_option = nullptr, *sample_period_option = nullptr,
+              *fixed_step_option = nullptr, *error_estimate_option = nullptr,
+              *jacobian_option = nullptr, *linear_solver_option = nullptr,
+              *newton_form_option = nullptr;
+};
+
+void add_run_options(CLI::App* run, RunOptions* o) {
+  run->add_option("SCENE", o->scene,
+                  "Scene file: YAML with cloth, rope and mesh components (DESIGN.md section 9). "
+                  "Bare URDF files are not supported yet.")
+      ->required();
+
+  const std::string simulation = "Simulation (each overrides the scene's simulation block)";
+  o->integrator_option =
+      run->add_option("--integrator", o->integrator,
+                      "Integration method: " + join(integrator_names(), ", "))
+          ->check(CLI::IsMember(integrator_names()))
+          ->group(simulation);
+  o->t_final_option = run->add_option("--t-final", o->t_final, "End time of the run, s")
+                          ->check(number_check("POSITIVE", false, false))
+                          ->group(simulation);
+  o->step_option =
+      run->add_option("--step", o->step, "Step size, s: the maximum (and initial) step, or the "
+                                         "step itself with --fixed-step")
+          ->check(number_check("POSITIVE", false, false))
+          ->group(simulation);
+  o->fixed_step_option =
+      run->add_flag("--fixed-step,!--no-fixed-step", o->fixed_step,
+                    "Take fixed steps of --step (no error control), or force error control")
+          ->group(simulation);
+  o->error_estimate_option =
+      run->add_flag("--error-estimate,!--no-error-estimate", o->error_estimate,
+                    "With --fixed-step: also compute the error estimate (VIE: two half steps) "
+                    "and report it; error-controlled runs always estimate")
+          ->group(simulation);
+  o->accuracy_option =
+      run->add_option("--accuracy", o->accuracy,
+                      "Target accuracy: weighted infinity norm of the local error, in (0, 1]")
+          ->check(number_check("(0,1]", false, true))
+          ->group(simulation);
+  o->sample_period_option =
+      run->add_option("--sample-period", o->sample_period,
+                      "Time between samples (CSV rows, VTK frames), s; 0: one per step")
+          ->check(number_check("NON-NEGATIVE", true, false))
+          ->group(simulation);
+
+  const std::string newton = "Implicit integrators (override the scene)";
+  o->jacobian_option = run->add_option("--jacobian", o->jacobian,
+                                       "Force Jacobians: " + join(jacobian_scheme_names(), ", ") +
+                                           " (finite differences use a sparse column colouring)")
+                           ->check(CLI::IsMember(jacobian_scheme_names()))
+                           ->group(newton);
+  o->linear_solver_option =
+      run->add_option("--linear-solver", o->linear_solver,
+                      "Newton linear solver: " + join(linear_solver_names(), ", ") +
+                          " (auto picks by size, density and symmetry; the stats say why)")
+          ->check(CLI::IsMember(linear_solver_names()))
+          ->group(newton);
+  o->newton_form_option =
+      run->add_option("--newton-form", o->newton_form,
+                      "Newton matrix: mass-matrix (W = M - hD - h^2 K N, sparse and symmetric) "
+                      "or generic (Drake's I - h J)")
+          ->check(CLI::IsMember(newton_form_names()))
+          ->group(newton);
+  run->add_flag("--full-newton", o->full_newton,
+                "Fresh Jacobian and factorization at every Newton iteration")
+      ->group(newton);
+  run->add_flag("--no-reuse", o->no_reuse,
+                "Fresh Jacobian and factorization at every step attempt (no reuse ladder)")
+      ->group(newton);
+
+  const std::string outputs = "Output (files appear only when complete)";
+  run->add_option("-o,--output", o->output,
+                  "Trajectory CSV: t, q:<name>..., v:<name>...; one row per sample")
+      ->group(outputs);
+  run->add_option("--stats", o->stats,
+                  "Statistics JSON: DOFs, method, linear solver and why, work counters, wall "
+                  "time split, energy")
+      ->group(outputs);
+  run->add_option("--vtk", o->vtk,
+                  "Directory for ParaView frames: <scene>_NNNNN.vtk per sample and "
+                  "<scene>.vtk.series")
+      ->group(outputs);
+  run->add_option("--set", o->sets,
+                  "Override a scene value, PATH=VALUE with VALUE in YAML (repeatable): "
+                  "cloth.stretch.k=1e6, cloth.nodes=[64,64], simulation.accuracy=1e-5, "
+                  "gravity=[0,0,-1]")
+      // One value per --set, so that `--set a=1 scene.yaml` does not take the
+      // scene file for a second override.
+      ->allow_extra_args(false)
+      ->group("Scene");
+  run->add_flag("-q,--quiet", o->quiet, "No progress bar and no notices on stderr")
+      ->group(outputs);
+  run->add_flag("--summary", o->summary,
+                "Print a short summary to stdout: DOFs, method, steps, Newton work, linear "
+                "solver, wall time, energy")
+      ->group(outputs);
+
+  run->footer(
+      "Exit codes: 0 done; 2 bad input (scene, options); 3 integration failed (the CSV keeps "
+      "the rows so far, marked '# stopped early'); 1 other errors.\n"
+      "Example: stiffsim run models/cloth.yaml --t-final 0.5 --set cloth.nodes=[16,16] "
+      "--output cloth.csv --stats cloth.json --summary");
+}
+
+// Applies the options the user gave on top of the scene's simulation block.
+void apply_options(const RunOptions& o, SceneConfig* config) {
+  if (o.integrator_option->count() > 0) config->integrator_name = o.integrator;
+  if (o.t_final_option->count() > 0) config->simulation.t_final = o.t_final;
+  if (o.step_option->count() > 0) config->integrator.max_step = o.step;
+  if (o.fixed_step_option->count() > 0) config->integrator.fixed_step = o.fixed_step;
+  if (o.error_estimate_option->count() > 0) config->integrator.error_estimate = o.error_estimate;
+  if (o.accuracy_option->count() > 0) config->integrator.accuracy = o.accuracy;
+  if (o.sample_period_option->count() > 0) config->simulation.sample_period = o.sample_period;
+  if (o.jacobian_option->count() > 0) {
+    config->implicit.jacobian = parse_jacobian_scheme(o.jacobian);
+  }
+  if (o.linear_solver_option->count() > 0) {
+    config->implicit.linear_solver = parse_linear_solver_kind(o.linear_solver);
+  }
+  if (o.newton_form_option->count() > 0) {
+    config->implicit.newton_form = parse_newton_form(o.newton_form);
+  }
+  if (o.full_newton) config->implicit.full_newton = true;
+  if (o.no_reuse) config->implicit.reuse = false;
+  if (config->integrator.min_step > config->integrator.max_step) {
+    throw InputError("--step " + std::to_string(config->integrator.max_step) +
+                     " is below the scene's simulation.min_step " +
+                     std::to_string(config->integrator.min_step));
+  }
+}
+
+// A one-line progress bar on stderr, redrawn at most ten times a second so
+// that drawing it never costs more than the steps it reports.
+class ProgressBar {
+ public:
+  ProgressBar(bool enabled, double t_final) : enabled_(enabled), t_final_(t_final) {}
+
+  void update(double fraction) {
+    if (!enabled_) return;
+    const auto now = std::chrono::steady_clock::now();
+    if (drawn_ && now - last_draw_ < std::chrono::milliseconds(100) && fraction < 1.0) return;
+    last_draw_ = now;
+    drawn_ = true;
+    constexpr int kWidth = 30;
+    const int filled = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * kWidth);
+    const double elapsed = std::chrono::duration<double>(now - start_).count();
+    char eta[32] = "";
+    if (fraction > 0.01) {
+      std::snprintf(eta, sizeof(eta), ", eta %.0f s", elapsed / fraction * (1.0 - fraction));
+    }
+    std::fprintf(stderr, "\r[%s%s] %3.0f%%  t = %.4g / %g s  (%.1f s%s)\033[K",
+                 std::string(filled, '#').c_str(), std::string(kWidth - filled, '.').c_str(),
+                 100.0 * fraction, fraction * t_final_, t_final_, elapsed, eta);
+    std::fflush(stderr);
+  }
+
+  void clear() {
+    if (enabled_ && drawn_) {
+      std::fputs("\r\033[K", stderr);
+      std::fflush(stderr);
+    }
+    drawn_ = false;
+  }
+
+ private:
+  bool enabled_;
+  double t_final_;
+  bool drawn_ = false;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::time_point last_draw_;
+};
+
+void print_summary(const RunSummary& s, const std::string& source) {
+  const IntegratorStatistics& st = s.statistics;
+  const IntegratorReport& r = s.report;
+  std::printf("scene          %s (%s)\n", s.scene.c_str(), source.c_str());
+  std::printf("dofs           nq %d, nv %d, nz %d\n", s.dofs.nq, s.dofs.nv, s.dofs.nz);
+  std::printf("integrator     %s, %s, accuracy %g, step %g%s\n", r.method.c_str(), r.mode.c_str(),
+              s.accuracy, s.step, r.error_estimate ? ", error estimate" : "");
+  if (!r.jacobian_scheme.empty()) {
+    std::printf("newton         %s form, %s Jacobian\n", r.newton_form.c_str(),
+                r.jacobian_scheme.c_str());
+  }
+  std::printf("steps          %ld (largest %g, smallest %g), %ld shrinks from error control, "
+              "%ld from Newton failures\n",
+              st.steps_taken, st.largest_step_size_taken, st.smallest_adapted_step_size_taken,
+              st.step_shrinkages_from_error_control, st.step_shrinkages_from_substep_failures);
+  std::printf("work           %ld Newton iterations, %ld factorizations, %ld Jacobian "
+              "evaluations, %ld derivative evaluations\n",
+              st.newton_raphson_iterations, st.iteration_matrix_factorizations,
+              st.jacobian_evaluations, st.derivative_evaluations);
+  if (!r.linear_solver.empty()) {
+    std::printf("linear solver  %s: %s%s%s\n", r.linear_solver.c_str(),
+                r.linear_solver_reason.c_str(), r.linear_solver_fallback.empty() ? "" : "; ",
+                r.linear_solver_fallback.c_str());
+    std::printf("nonzeros       iteration matrix %ld, factor %ld\n", st.iteration_matrix_nonzeros,
+                st.factor_nonzeros);
+  }
+  std::printf("wall time      %.3f s (jacobian %.3f, assembly %.3f, factorization %.3f, "
+              "solve %.3f, derivatives %.3f)\n",
+              s.wall_seconds, st.jacobian_seconds, st.assembly_seconds, st.factorization_seconds,
+              st.solve_seconds, st.derivative_seconds);
+  std::printf("energy         start %.10g J, end %.10g J\n", s.energy_start, s.energy_end);
+  std::printf("samples        %ld up to t = %g%s\n", s.samples, s.t_reached,
+              s.stopped_early ? " (stopped early)" : "");
+}
+
+int run_command(const RunOptions& options) {
+  SceneConfig config = load_scene(options.scene, options.sets);
+  apply_options(options, &config);
+  const Scene& scene = *config.scene;
+  std::unique_ptr<IntegratorBase> integrator =
+      make_integrator(config.integrator_name, scene, config.integrator, config.implicit);
+
+  // Writers only now that the scene has loaded: a bad scene leaves no files.
+  // Each reserves a temporary file, so an unwritable path fails before the run.
+  std::unique_ptr<TrajectoryWriter> trajectory;
+  std::unique_ptr<StatsWriter> stats;
+  std::unique_ptr<VtkWriter> vtk;
+  if (!options.output.empty()) {
+    trajectory = std::make_unique<TrajectoryWriter>(options.output, scene);
+  }
+  if (!options.stats.empty()) stats = std::make_unique<StatsWriter>(options.stats);
+  if (!options.vtk.empty()) vtk = std::make_unique<VtkWriter>(options.vtk, scene, config.surfaces);
+
+  RunSummary summary;
+  summary.scene = scene.name();
+  summary.dofs = scene.dimensions();
+  summary.accuracy = config.integrator.accuracy;
+  summary.step = config.integrator.max_step;
+  summary.sample_period = config.simulation.sample_period;
+  summary.t_final = config.simulation.t_final;
+  const State initial = scene.initial_state();
+  summary.energy_start = scene.energy(initial);
+
+  Eigen::VectorXd last_x;
+  const SampleCallback on_sample = [&](double t, const Eigen::VectorXd& x) {
+    if (trajectory) trajectory->write(t, x);
+    if (vtk) vtk->write_frame(t, x);
+    summary.t_reached = t;
+    last_x = x;
+    ++summary.samples;
+    return true;
+  };
+  ProgressBar bar(!options.quiet && isatty(STDERR_FILENO), config.simulation.t_final);
+  const ProgressCallback on_progress = [&](double fraction) { bar.update(fraction); };
+
+  int exit_code = 0;
+  std::string failure;
+  const auto start = std::chrono::steady_clock::now();
+  try {
+    const SimulationResult result =
+        simulate(*integrator, initial, config.simulation, on_sample, on_progress);
+    summary.stopped_early = result.stopped_early;
+    if (result.stopped_early) summary.stop_reason = "stopped by the sample callback";
+  } catch (const IntegrationError& e) {
+    exit_code = IntegrationError::kExitCode;
+    char where[96];
+    std::snprintf(where, sizeof(where), "integration failed at t = %.10g (step %.3g): ", e.time(),
+                  e.step());
+    failure = where + std::string(e.what());
+  } catch (const InputError& e) {
+    exit_code = InputError::kExitCode;
+    failure = e.what();
+  } catch (const std::exception& e) {
+    exit_code = 1;
+    failure = e.what();
+  }
+  summary.wall_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  bar.clear();
+  if (!failure.empty()) {
+    summary.stopped_early = true;
+    summary.stop_reason = failure;
+  }
+  summary.statistics = integrator->statistics();
+  summary.report = integrator->report();
+  if (last_x.size() > 0) summary.energy_end = scene.energy(State(summary.t_reached, last_x));
+
+  // A failed run keeps what it computed, marked as incomplete; if even that
+  // cannot be written, the writers' destructors remove their temporary files.
+  std::vector<std::string> write_errors;
+  const auto finish = [&](auto& writer) {
+    if (!writer) return;
+    try {
+      if (failure.empty()) {
+        writer->finish();
+      } else {
+        writer->finish_incomplete(failure);
+      }
+    } catch (const std::exception& e) {
+      write_errors.push_back(e.what());
+    }
+  };
+  finish(trajectory);
+  finish(vtk);
+  if (stats) {
+    try {
+      stats->write(summary);
+    } catch (const std::exception& e) {
+      write_errors.push_back(e.what());
+    }
+  }
+
+  if (options.summary) print_summary(summary, config.source);
+  if (!failure.empty()) {
+    std::fprintf(stderr, "stiffsim: error: %s\n", failure.c_str());
+    if (trajectory && write_errors.empty()) {
+      std::fprintf(stderr, "stiffsim: %s keeps the %ld samples up to t = %g\n",
+                   trajectory->path().c_str(), trajectory->rows(), summary.t_reached);
+    }
+  } else if (!options.quiet && !options.summary) {
+    std::fprintf(stderr, "stiffsim: %s: %ld samples to t = %g in %.2f s (%ld steps)\n",
+                 summary.scene.c_str(), summary.samples, summary.t_reached, summary.wall_seconds,
+                 summary.statistics.steps_taken);
+  }
+  for (const std::string& e : write_errors) std::fprintf(stderr, "stiffsim: error: %s\n", e.c_str());
+  if (exit_code == 0 && !write_errors.empty()) exit_code = 1;
+  return exit_code;
+}
+
+}  // namespace
+}  // namespace stiffsim
+
+int main(int argc, char** argv) {
+  using namespace stiffsim;
+  CLI::App app{
+      "stiffsim: sparse multibody simulation with the velocity-implicit Euler integrator.\n"
+      "Cloth, rope and triangle-mesh mass-spring scenes are described in YAML files "
+      "(models/*.yaml)."};
+  app.set_version_flag("--version", "stiffsim 0.1.0");
+  app.require_subcommand(1);
+  app.footer("Run 'stiffsim run --help' for the options of a run.");
+  RunOptions options;
+  CLI::App* run = app.add_subcommand(
+      "run", "Simulate a scene and write its trajectory (CSV), statistics (JSON) and frames (VTK)");
+  add_run_options(run, &options);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::Success& e) {
+    return app.exit(e);  // --help, --version
+  } catch (const CLI::ParseError& e) {
+    std::fprintf(stderr, "stiffsim: error: %s\nRun 'stiffsim %s--help' for the options.\n",
+                 e.what(), run->parsed() ? "run " : "");
+    return kUsageExitCode;
+  }
+
+  try {
+    return run_command(options);
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "stiffsim: error: %s\n", e.what());
+    return InputError::kExitCode;
+  } catch (const IntegrationError& e) {
+    std::fprintf(stderr, "stiffsim: error: %s\n", e.what());
+    return IntegrationError::kExitCode;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "stiffsim: error: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,98 @@
+// What one VIE step of a cloth costs against one sparse factorization and one
+// solve of its iteration matrix: with reuse a step should cost a few solves,
+// not a factorization.
+//
+//   build/bench/cloth_step_bench --benchmark_repetitions=5
+//     --benchmark_report_aggregates_only=true
+
+#include <benchmark/benchmark.h>
+
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/linalg/linear_solver.h"
+#include "stiffsim/model/particle_meshes.h"
+#include "stiffsim/model/particles.h"
+
+namespace stiffsim {
+namespace {
+
+constexpr double kStep = 1.0 / 60;
+
+ParticleSystem make_scene(int n) {
+  ClothSpec spec;
+  spec.nx = spec.ny = n;
+  spec.total_mass = 0.4;
+  spec.stretch = SpringParameters{1e3, 0.5};
+  spec.shear = SpringParameters{1e2, 0.1};
+  spec.bend = SpringParameters{10.0, 0.05};
+  return ParticleSystem(make_cloth(spec));
+}
+
+// The iteration matrix W = M - h D - h^2 K at the initial state.
+SparseMatrix iteration_matrix(const ParticleSystem& sys) {
+  const State s = sys.initial_state();
+  const Dimensions d = sys.dimensions();
+  SparseMatrix M = sys.mass_matrix_pattern();
+  sys.mass_matrix(s.q(d), &M);
+  ForceJacobians J = sys.jacobian_pattern();
+  sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), JacobianRequest{true}, &J);
+  SparseMatrix W = M - kStep * J.dF_dv - kStep * kStep * J.dF_dq;
+  W.makeCompressed();
+  return W;
+}
+
+void BM_Factorize(benchmark::State& state) {
+  const ParticleSystem sys = make_scene(state.range(0));
+  const SparseMatrix W = iteration_matrix(sys);
+  auto choice = make_linear_solver(LinearSolverKind::kAuto, W, true);
+  choice.solver->analyze(W);
+  for (auto _ : state) benchmark::DoNotOptimize(choice.solver->factorize(W));
+  state.counters["dofs"] = W.rows();
+  state.SetLabel(choice.solver->method());
+}
+
+void BM_Solve(benchmark::State& state) {
+  const ParticleSystem sys = make_scene(state.range(0));
+  const SparseMatrix W = iteration_matrix(sys);
+  auto choice = make_linear_solver(LinearSolverKind::kAuto, W, true);
+  choice.solver->analyze(W);
+  choice.solver->factorize(W);
+  Eigen::VectorXd b = Eigen::VectorXd::Ones(W.rows()), x(W.rows());
+  for (auto _ : state) choice.solver->solve(b, &x);
+  state.counters["dofs"] = W.rows();
+}
+
+// Steady-state fixed-step VIE (1 Newton solve per step, or 3 with the
+// estimate), after a warm-up second so the reuse ladder is in its regime.
+void BM_VieStep(benchmark::State& state) {
+  const ParticleSystem sys = make_scene(state.range(0));
+  IntegratorSettings settings;
+  settings.fixed_step = true;
+  settings.max_step = kStep;
+  settings.error_estimate = state.range(1) != 0;
+  settings.accuracy = 1e-3;
+  VelocityImplicitEuler vie(sys, settings, ImplicitSettings{});
+  vie.initialize(sys.initial_state());
+  vie.integrate_to(1.0);
+  const IntegratorStatistics before = vie.statistics();
+  double t = 1.0;
+  for (auto _ : state) {
+    t += kStep;
+    vie.step_at_most(t);
+  }
+  const IntegratorStatistics& after = vie.statistics();
+  const double steps = after.steps_taken - before.steps_taken;
+  state.counters["dofs"] = sys.dimensions().nv;
+  state.counters["newton_its/step"] =
+      (after.newton_raphson_iterations - before.newton_raphson_iterations) / steps;
+  state.counters["factorizations/step"] =
+      (after.iteration_matrix_factorizations - before.iteration_matrix_factorizations) / steps;
+}
+
+BENCHMARK(BM_Factorize)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Solve)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_VieStep)->Args({32, 0})->Args({100, 0})->Args({100, 1})->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace stiffsim
+
+BENCHMARK_MAIN();

@@ -1,0 +1,67 @@
+#pragma once
+// Statistics of an integration run, named as Drake names them, plus the
+// counters that prove which work was skipped.
+
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace stiffsim {
+
+struct IntegratorStatistics {
+  static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+  long steps_taken = 0;
+  long derivative_evaluations = 0;
+  long derivative_evaluations_for_jacobian = 0;
+  long jacobian_evaluations = 0;
+  long iteration_matrix_factorizations = 0;
+  long newton_raphson_iterations = 0;
+  // The share of the five counters above spent on the error estimate (for
+  // VIE: the large step, as in Drake).
+  long error_estimator_derivative_evaluations = 0;
+  long error_estimator_derivative_evaluations_for_jacobian = 0;
+  long error_estimator_jacobian_evaluations = 0;
+  long error_estimator_iteration_matrix_factorizations = 0;
+  long error_estimator_newton_raphson_iterations = 0;
+  long substep_failures = 0;
+  long step_shrinkages_from_substep_failures = 0;
+  long step_shrinkages_from_error_control = 0;
+  double smallest_adapted_step_size_taken = kNaN;
+  double largest_step_size_taken = kNaN;
+  double actual_initial_step_size_taken = kNaN;
+
+  // Work counters beyond Drake's.
+  long newton_solves = 0;               // Newton solves attempted (per step: 1, or 3 with the estimate)
+  long velocity_map_evaluations = 0;    // N(q) products and assemblies (0 when N = I)
+  long mass_matrix_assemblies = 0;      // 1 for a constant M
+  long symbolic_analyses = 0;           // sparse orderings / elimination trees
+  long linear_solves = 0;
+  long dense_output_evaluations = 0;    // derivative evaluations spent on dense output
+  long jacobian_approximated_terms = 0; // definite clamps in iteration matrices (Choi & Ko)
+  long iteration_matrix_nonzeros = 0;
+  long factor_nonzeros = 0;
+
+  // Wall time split, seconds.
+  double jacobian_seconds = 0.0;
+  double assembly_seconds = 0.0;
+  double factorization_seconds = 0.0;
+  double solve_seconds = 0.0;
+  double derivative_seconds = 0.0;
+};
+
+// What an integrator says about itself for reports and stats files.
+struct IntegratorReport {
+  std::string method;                 // "vie", ...
+  std::string mode;                   // "fixed-step" or "error-controlled"
+  bool error_estimate = false;        // whether the estimate was computed
+  bool extrapolated = false;
+  std::string jacobian_scheme;        // empty for explicit methods
+  std::string newton_form;            // "mass-matrix" or "generic"
+  std::string linear_solver;          // method in use
+  std::string linear_solver_reason;   // why it was chosen
+  std::string linear_solver_fallback; // set if it fell back
+  std::vector<std::string> skipped;   // work left out because the scene does not need it
+};
+
+}  // namespace stiffsim

@@ -1,0 +1,34 @@
+#pragma once
+// The simulation loop: drives an integrator to t_final and hands samples at
+// the requested period (interpolated by dense output when a sample falls
+// inside a step) to a callback.
+
+#include <functional>
+
+#include "stiffsim/integrators/integrator_base.h"
+
+namespace stiffsim {
+
+struct SimulationSettings {
+  double t_final = 1.0;
+  double sample_period = 0.01;  // <= 0: a sample at every step end
+};
+
+struct SimulationResult {
+  double wall_seconds = 0.0;
+  long samples = 0;
+  bool stopped_early = false;  // the sample callback or progress asked to stop
+};
+
+// Called with each sample (t, x); return false to stop the run early.
+using SampleCallback = std::function<bool(double t, const Eigen::VectorXd& x)>;
+// Called after every step with the fraction done (0..1).
+using ProgressCallback = std::function<void(double fraction)>;
+
+// Samples t = 0, T, 2T, ... and t_final. Throws IntegrationError from the
+// integrator after the samples before the failure have been delivered.
+SimulationResult simulate(IntegratorBase& integrator, const State& initial,
+                          const SimulationSettings& settings, const SampleCallback& on_sample,
+                          const ProgressCallback& on_progress = nullptr);
+
+}  // namespace stiffsim

@@ -1,0 +1,73 @@
+#pragma once
+// Sparse Cholesky (CHOLMOD, raw C API) for symmetric iteration matrices that
+// are expected to be positive definite. The matrix is read through its lower
+// triangle only (stype = -1), wrapped without copying.
+//
+// Fallbacks, each taken at most once and then kept for the solver's life:
+// supernodal LL^T -> simplicial LDL^T when CHOLMOD reports the matrix not
+// positive definite (LDL^T without pivoting still handles most mildly
+// indefinite matrices), then LDL^T -> UMFPACK when LDL^T meets a zero or tiny
+// pivot (UMFPACK pivots for stability). Each switch is printed once to stderr
+// and recorded in fallback_note(). A matrix that is positive definite but
+// numerically singular makes factorize() return false without a fallback:
+// Cholesky is stable there, so another method would not do better.
+
+#include <cholmod.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiffsim/linalg/linear_solver.h"
+#include "stiffsim/linalg/umfpack_solver.h"
+
+namespace stiffsim {
+
+class CholmodSolver final : public LinearSolver {
+ public:
+  CholmodSolver();
+  ~CholmodSolver() override;
+  CholmodSolver(const CholmodSolver&) = delete;
+  CholmodSolver& operator=(const CholmodSolver&) = delete;
+
+  // Throws std::invalid_argument for a non-square pattern and
+  // std::runtime_error if CHOLMOD fails (e.g. out of memory).
+  void analyze(const SparseMatrix& pattern) override;
+  // Throws std::invalid_argument if A's pattern differs from the analyzed one.
+  // counters().factorizations counts calls; an analysis redone for a fallback
+  // counts in counters().analyses and its time in analysis_seconds.
+  bool factorize(const SparseMatrix& A) override;
+  void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
+  std::string method() const override;
+  // Supernodal: L->xsize, the entries stored in the supernodes (including the
+  // explicit zeros that make supernodes dense). Simplicial LDL^T: the sum of
+  // the column counts L->nz, with D on the diagonal of L. UMFPACK: its count.
+  long factor_nonzeros() const override;
+
+ private:
+  enum class Mode { kSupernodalLLT, kLDLT, kUmfpack };
+
+  cholmod_sparse wrap(const SparseMatrix& A) const;
+  void analyze_with_cholmod(const SparseMatrix& pattern);
+  // One numeric factorization in the current mode, taking the fallbacks.
+  bool factorize_with_fallback(const SparseMatrix& A);
+  void switch_mode(Mode next, const std::string& why);
+  void free_factor_and_workspace();
+
+  cholmod_common common_;
+  cholmod_factor* factor_ = nullptr;
+  // cholmod_solve2 reuses these when their sizes fit, so that steady-state
+  // solves allocate nothing.
+  cholmod_dense* solution_ = nullptr;
+  cholmod_dense* solve_workspace_y_ = nullptr;
+  cholmod_dense* solve_workspace_e_ = nullptr;
+  std::unique_ptr<UmfpackSolver> umfpack_;  // only after the last fallback
+  Mode mode_ = Mode::kSupernodalLLT;
+  int n_ = -1;  // -1 until analyze()
+  // The analyzed pattern, to reject a matrix with another one: CHOLMOD would
+  // silently factor garbage.
+  std::vector<int> outer_, inner_;
+  bool factored_ = false;
+};
+
+}  // namespace stiffsim

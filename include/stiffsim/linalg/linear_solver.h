@@ -1,0 +1,84 @@
+#pragma once
+// One small interface for the Newton systems: analyze(pattern) once,
+// factorize(values) when the reuse ladder asks, solve(rhs) per iteration.
+// Integrators never name a concrete solver.
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+
+#include "stiffsim/linalg/sparse_pattern.h"
+
+namespace stiffsim {
+
+enum class LinearSolverKind { kAuto, kDenseLU, kDenseLDLT, kCholmod, kUmfpack };
+
+// "auto", "dense", "dense-lu", "dense-ldlt", "cholmod", "umfpack". "dense"
+// means kDenseLU whatever the symmetry (LU needs neither symmetry nor
+// definiteness); only kAuto picks dense LDLT by itself. Throws
+// std::invalid_argument naming the valid names.
+LinearSolverKind parse_linear_solver_kind(const std::string& name);
+std::string to_string(LinearSolverKind kind);
+
+struct LinearSolverCounters {
+  long analyses = 0;        // symbolic analyses (ordering, elimination tree),
+                            // including one redone by a fallback
+  long factorizations = 0;  // factorize() calls, failed ones included
+  long solves = 0;          // right-hand sides solved
+  double analysis_seconds = 0.0;
+  double factorization_seconds = 0.0;
+  double solve_seconds = 0.0;
+};
+
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+
+  // Symbolic analysis of the pattern of A (values ignored). Called once per
+  // pattern by the caller (make_linear_solver does not call it), before any
+  // factorize(); factorize() requires compressed matrices with exactly this
+  // pattern (sparse solvers throw std::invalid_argument otherwise).
+  virtual void analyze(const SparseMatrix& pattern) = 0;
+  // Numeric factorization. Returns false if A is numerically singular (or
+  // contains non-finite values); the solver then cannot solve until the next
+  // successful factorize(). "Numerically singular" means the same for every
+  // solver: smallest / largest pivot magnitude <= n * machine epsilon, the
+  // size rounding leaves in place of a zero pivot. The solver keeps its own
+  // copy of whatever solve() needs, so A may be overwritten after this returns.
+  virtual bool factorize(const SparseMatrix& A) = 0;
+  // x = A^-1 b with the last factorization; allocates nothing once x has size
+  // n and one solve has been done. x may not alias b. Throws std::logic_error
+  // without a successful factorize().
+  virtual void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) = 0;
+
+  // What is in use now ("cholmod-supernodal-llt", "cholmod-ldlt", "umfpack",
+  // "dense-lu", ...); a fallback changes it.
+  virtual std::string method() const = 0;
+  // Nonzeros of the factor(s) after the last factorization.
+  virtual long factor_nonzeros() const = 0;
+  // Set once when the solver fell back to another method (e.g. the matrix was
+  // not positive definite), empty otherwise.
+  const std::string& fallback_note() const { return fallback_note_; }
+  const LinearSolverCounters& counters() const { return counters_; }
+
+ protected:
+  LinearSolverCounters counters_;
+  std::string fallback_note_;
+};
+
+struct LinearSolverChoice {
+  std::unique_ptr<LinearSolver> solver;
+  std::string reason;  // why this solver was picked, for the stats
+};
+
+// Picks and constructs a solver; the caller then calls analyze(pattern). For
+// kAuto: dense (LDLT if `symmetric`, else LU) when n <= 200 or nnz / n^2 > 10%,
+// else CHOLMOD when `symmetric` (values symmetric and expected positive
+// definite), UMFPACK otherwise. Explicit kinds are honoured as asked.
+// `symmetric` must be true for kCholmod and kDenseLDLT (std::invalid_argument
+// otherwise). Store both triangles of a symmetric A: CHOLMOD and dense LDLT read
+// only the lower one, but CHOLMOD's UMFPACK fallback reads all of A.
+LinearSolverChoice make_linear_solver(LinearSolverKind kind, const SparseMatrix& pattern,
+                                      bool symmetric);
+
+}  // namespace stiffsim

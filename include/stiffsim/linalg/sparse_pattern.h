@@ -1,0 +1,55 @@
+#pragma once
+// Sparse matrices with a pattern fixed once per scene. Values are written
+// through precomputed slots (indices into valuePtr()), so assembly in the hot
+// path never sorts triplets or allocates.
+
+#include <Eigen/SparseCore>
+#include <vector>
+
+namespace stiffsim {
+
+using SparseMatrix = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
+
+// Collects the (row, col) positions of a pattern; duplicates are merged.
+class PatternBuilder {
+ public:
+  PatternBuilder(int rows, int cols) : rows_(rows), cols_(cols) {}
+  void add(int row, int col);
+  // Every entry of a dense rows x cols block at (row0, col0).
+  void add_block(int row0, int col0, int rows, int cols);
+  // Every stored entry of `pattern`, shifted by (row0, col0).
+  void add_pattern(const SparseMatrix& pattern, int row0 = 0, int col0 = 0);
+  void add_diagonal(int first, int count);
+  // A compressed matrix with explicit zeros in every position of the pattern.
+  SparseMatrix build() const;
+  int rows() const { return rows_; }
+  int cols() const { return cols_; }
+
+ private:
+  int rows_, cols_;
+  std::vector<std::pair<int, int>> entries_;  // (col, row), sorted in build()
+};
+
+// Index into A.valuePtr() of entry (row, col); throws std::out_of_range if
+// (row, col) is not in the pattern.
+int slot_of(const SparseMatrix& A, int row, int col);
+
+// For every stored entry k of `part` (in storage order), the slot of the same
+// position in `whole`, shifted by (row0, col0). `part`'s pattern must be a
+// subset of `whole`'s.
+std::vector<int> slots_in(const SparseMatrix& whole, const SparseMatrix& part, int row0 = 0,
+                          int col0 = 0);
+
+// whole.valuePtr()[slots[k]] += scale * part.valuePtr()[k] for every k.
+void scatter_add(const SparseMatrix& part, const std::vector<int>& slots, double scale,
+                 SparseMatrix* whole);
+
+// True when A has the same pattern as its transpose (values not compared).
+bool is_structurally_symmetric(const SparseMatrix& A);
+
+// Zero every stored value, keeping the pattern.
+inline void set_zero_keep_pattern(SparseMatrix* A) {
+  std::fill(A->valuePtr(), A->valuePtr() + A->nonZeros(), 0.0);
+}
+
+}  // namespace stiffsim

@@ -1,0 +1,83 @@
+#pragma once
+// Particle mass-spring systems exactly as MODELS.md defines them: lumped
+// masses, linear springs with dampers along the spring axis, pins, gravity and
+// drag. N(q) = I, M constant and diagonal, analytic symmetric K and D.
+
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+#include "stiffsim/system.h"
+
+namespace stiffsim {
+
+struct Spring {
+  int a = 0, b = 0;            // node indices (pinned nodes allowed)
+  double rest_length = 0.0;    // L
+  double k = 0.0;              // stiffness, N/m
+  double c = 0.0;              // damping along the axis, N s/m
+};
+
+struct ParticleDescription {
+  std::string name;                        // component name: CSV columns <name>/n<i>/x
+  std::vector<Eigen::Vector3d> positions;  // every node, pinned ones included
+  std::vector<double> masses;              // every node, > 0
+  std::vector<Spring> springs;
+  std::vector<int> pinned;                 // node indices; not degrees of freedom
+  Eigen::Vector3d gravity{0.0, 0.0, -9.81};
+  double drag = 0.0;                       // alpha: f_i += -alpha m_i v_i
+};
+
+class ParticleSystem : public System {
+ public:
+  // Validates the description (finite positions, finite positive masses,
+  // spring and pinned node indices in range, a != b, k, c and rest lengths
+  // finite and >= 0; zero-rest-length springs are legal); throws InputError
+  // naming the component otherwise.
+  explicit ParticleSystem(ParticleDescription description);
+
+  Dimensions dimensions() const override;
+  Capabilities capabilities() const override;
+  std::string name() const override { return desc_.name; }
+  State initial_state() const override;
+  std::vector<std::string> position_names() const override;
+  std::vector<std::string> velocity_names() const override;
+
+  const SparseMatrix& mass_matrix_pattern() const override;
+  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override;
+  const ForceJacobians& jacobian_pattern() const override;
+  // dF/dv keeps only c u u^T: the derivative of the damping force through
+  // u(x) is dropped from dF/dq (MODELS.md allows it; it changes the Newton
+  // rate, never the solution). With request.definite the transverse factor
+  // (1 - L/l) is clamped at 0 and approximated_terms counts the springs.
+  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                       const ConstVectorRef& z, const JacobianRequest& request,
+                       ForceJacobians* J) const override;
+  // Kinetic + gravitational + spring potential energy.
+  double energy(const State& s) const override;
+
+  const ParticleDescription& description() const { return desc_; }
+  int node_count() const { return static_cast<int>(desc_.positions.size()); }
+  // DOF index of a node's x coordinate, or -1 if the node is pinned.
+  int dof_of_node(int node) const { return dof_of_node_[node]; }
+
+ private:
+  ParticleDescription desc_;
+  std::vector<int> dof_of_node_;  // 3*free index or -1
+  int free_nodes_ = 0;
+  SparseMatrix mass_pattern_;
+  ForceJacobians jacobian_pattern_;
+  // Per spring, the slots of its four 3x3 blocks (aa, ab, ba, bb) in the
+  // Jacobian patterns, -1 where a node is pinned; 9 slots per block,
+  // column-major within the block.
+  std::vector<std::array<int, 36>> spring_slots_;
+  // Slot of every diagonal entry (i, i) of the Jacobian patterns (for drag).
+  std::vector<int> diagonal_slots_;
+  // Mass of every DOF (each free node's mass three times): the diagonal of M.
+  Eigen::VectorXd free_mass_;
+};
+
+}  // namespace stiffsim

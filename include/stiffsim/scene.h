@@ -1,0 +1,68 @@
+#pragma once
+// A scene composes components; each owns a contiguous slice of q, v and z
+// (in the order given) and they do not interact, so every matrix of the scene
+// is block diagonal over its components. The scene is itself a System.
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "stiffsim/system.h"
+
+namespace stiffsim {
+
+class Scene : public System {
+ public:
+  Scene(std::string name, std::vector<std::unique_ptr<System>> components);
+
+  Dimensions dimensions() const override { return dims_; }
+  Capabilities capabilities() const override { return caps_; }
+  std::string name() const override { return name_; }
+  State initial_state() const override;
+  std::vector<std::string> position_names() const override;
+  std::vector<std::string> velocity_names() const override;
+  std::vector<std::string> misc_names() const override;
+
+  void map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
+                            VectorRef qdot) const override;
+  const SparseMatrix& velocity_map_pattern() const override { return velocity_map_pattern_; }
+  void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const override;
+  bool project_positions(VectorRef q) const override;
+
+  const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
+  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override;
+  void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                        const ConstVectorRef& z, VectorRef zdot) const override;
+  const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
+  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                       const ConstVectorRef& z, const JacobianRequest& request,
+                       ForceJacobians* J) const override;
+  double energy(const State& s) const override;
+
+  int component_count() const { return static_cast<int>(components_.size()); }
+  const System& component(int i) const { return *components_[i]; }
+  // Offsets of component i's slices in q, v and z.
+  const Dimensions& offsets(int i) const { return offsets_[i]; }
+
+ private:
+  std::string name_;
+  std::vector<std::unique_ptr<System>> components_;
+  std::vector<Dimensions> offsets_;
+  Dimensions dims_;
+  Capabilities caps_;
+  SparseMatrix mass_pattern_, velocity_map_pattern_;
+  ForceJacobians jacobian_pattern_;
+  // Per component, scratch matrices with the component's own patterns and
+  // the slots of their entries in the scene's matrices.
+  struct Slots {
+    std::vector<int> M, N, dF_dq, dF_dv, dF_dz, dfz_dq, dfz_dv, dfz_dz;
+  };
+  std::vector<Slots> slots_;
+  mutable std::vector<SparseMatrix> scratch_M_, scratch_N_;
+  mutable std::vector<ForceJacobians> scratch_J_;
+};
+
+}  // namespace stiffsim

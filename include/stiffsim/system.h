@@ -1,0 +1,115 @@
+#pragma once
+// The problem every integrator sees (DESIGN.md section 1):
+//   q_dot = N(q) v,   M(q) v_dot = F(t, q, v, z),   z_dot = f_z(t, q, v, z).
+// A System evaluates these pieces and says what it can do, so integrators can
+// leave out the work a scene does not need.
+
+#include <Eigen/Core>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "stiffsim/linalg/sparse_pattern.h"
+#include "stiffsim/state.h"
+
+namespace stiffsim {
+
+using VectorRef = Eigen::Ref<Eigen::VectorXd>;
+using ConstVectorRef = Eigen::Ref<const Eigen::VectorXd>;
+
+struct Capabilities {
+  bool identity_velocity_map = false;   // N(q) = I (then nq == nv): no N products at all
+  bool constant_mass_matrix = false;    // M assembled once per run
+  bool diagonal_mass_matrix = false;    // M diagonal: M^-1 is a division
+  bool symmetric_jacobians = false;     // dF/dq and dF/dv symmetric (conservative particles)
+  bool analytic_jacobians = false;      // force_jacobians() implemented
+  bool has_quaternions = false;         // q holds unit quaternions: project after each step
+  bool has_energy = false;              // energy() defined
+};
+
+// Force Jacobians, each with a pattern that is fixed for the lifetime of the
+// system (the values change, the structure never does).
+struct ForceJacobians {
+  SparseMatrix dF_dq;   // K: nv x nq
+  SparseMatrix dF_dv;   // D: nv x nv
+  SparseMatrix dF_dz;   // nv x nz
+  SparseMatrix dfz_dq;  // nz x nq
+  SparseMatrix dfz_dv;  // nz x nv
+  SparseMatrix dfz_dz;  // nz x nz
+  // Terms the system replaced by a definite approximation on request (see
+  // JacobianRequest::definite); 0 for exact Jacobians.
+  long approximated_terms = 0;
+};
+
+struct JacobianRequest {
+  // Allow an approximation that keeps -dF/dq positive semidefinite where the
+  // exact Jacobian is not (a compressed spring's transverse stiffness
+  // k (1 - L/l) < 0 clamped at 0, Choi & Ko 2002). Only for iteration
+  // matrices: the residual always stays exact, so the converged answer is
+  // unchanged.
+  bool definite = false;
+};
+
+class System {
+ public:
+  virtual ~System() = default;
+
+  virtual Dimensions dimensions() const = 0;
+  virtual Capabilities capabilities() const = 0;
+  virtual std::string name() const = 0;
+
+  // Initial state at t = 0 as the model defines it.
+  virtual State initial_state() const = 0;
+
+  // Column names of the trajectory CSV (DESIGN.md section 8), without the
+  // "q:" / "v:" / "z:" prefixes. Sizes nq, nv, nz.
+  virtual std::vector<std::string> position_names() const = 0;
+  virtual std::vector<std::string> velocity_names() const = 0;
+  virtual std::vector<std::string> misc_names() const { return {}; }
+
+  // --- Kinematics: q_dot = N(q) v. The defaults are N = I. ---
+  virtual void map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
+                                    VectorRef qdot) const;
+  // Pattern of N (nq x nv), fixed.
+  virtual const SparseMatrix& velocity_map_pattern() const;
+  // Values of N(q) written into a matrix with velocity_map_pattern().
+  virtual void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const;
+  // Restores invariants of q after a step (unit quaternions). Returns true if
+  // q changed.
+  virtual bool project_positions(VectorRef q) const {
+    (void)q;
+    return false;
+  }
+
+  // --- Mass matrix M(q), nv x nv, symmetric positive definite. ---
+  virtual const SparseMatrix& mass_matrix_pattern() const = 0;
+  virtual void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const = 0;
+
+  // --- Forces F (size nv) and f_z (size nz). ---
+  virtual void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                      const ConstVectorRef& z, VectorRef F) const = 0;
+  virtual void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                const ConstVectorRef& z, VectorRef zdot) const {
+    (void)t, (void)q, (void)v, (void)z, (void)zdot;
+  }
+
+  // --- Jacobians with fixed patterns. ---
+  // Matrices sized and structured as force_jacobians() fills them.
+  virtual const ForceJacobians& jacobian_pattern() const = 0;
+  // Analytic values; only called when capabilities().analytic_jacobians.
+  virtual void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                               const ConstVectorRef& z, const JacobianRequest& request,
+                               ForceJacobians* J) const;
+
+  // Total energy (kinetic + potential) where defined, NaN otherwise.
+  virtual double energy(const State& s) const {
+    (void)s;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+};
+
+// Builds an empty ForceJacobians with the right sizes for `d` (all patterns
+// empty): a starting point for systems that fill only some blocks.
+ForceJacobians empty_jacobians(const Dimensions& d);
+
+}  // namespace stiffsim

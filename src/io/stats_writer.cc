@@ -1,0 +1,143 @@
+#include "stiffsim/io/stats_writer.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+#include "stiffsim/error.h"
+
+namespace stiffsim {
+namespace {
+
+// ordered_json keeps the keys in the order a reader expects (scene first).
+using json = nlohmann::ordered_json;
+
+// nlohmann would write NaN as null too, but only as a side effect of its
+// serializer; being explicit keeps the file valid JSON whatever the settings.
+json number(double value) { return std::isfinite(value) ? json(value) : json(nullptr); }
+
+// Every field of IntegratorStatistics, by its exact name. A field added to
+// the struct must be added here too: the static_assert below stops the build
+// until it is, so the stats file never silently misses a counter.
+json statistics_json(const IntegratorStatistics& s) {
+  static_assert(sizeof(IntegratorStatistics) == 31 * 8,
+                "IntegratorStatistics changed: update statistics_json()");
+  json j;
+  j["steps_taken"] = s.steps_taken;
+  j["derivative_evaluations"] = s.derivative_evaluations;
+  j["derivative_evaluations_for_jacobian"] = s.derivative_evaluations_for_jacobian;
+  j["jacobian_evaluations"] = s.jacobian_evaluations;
+  j["iteration_matrix_factorizations"] = s.iteration_matrix_factorizations;
+  j["newton_raphson_iterations"] = s.newton_raphson_iterations;
+  j["error_estimator_derivative_evaluations"] = s.error_estimator_derivative_evaluations;
+  j["error_estimator_derivative_evaluations_for_jacobian"] =
+      s.error_estimator_derivative_evaluations_for_jacobian;
+  j["error_estimator_jacobian_evaluations"] = s.error_estimator_jacobian_evaluations;
+  j["error_estimator_iteration_matrix_factorizations"] =
+      s.error_estimator_iteration_matrix_factorizations;
+  j["error_estimator_newton_raphson_iterations"] = s.error_estimator_newton_raphson_iterations;
+  j["substep_failures"] = s.substep_failures;
+  j["step_shrinkages_from_substep_failures"] = s.step_shrinkages_from_substep_failures;
+  j["step_shrinkages_from_error_control"] = s.step_shrinkages_from_error_control;
+  j["smallest_adapted_step_size_taken"] = number(s.smallest_adapted_step_size_taken);
+  j["largest_step_size_taken"] = number(s.largest_step_size_taken);
+  j["actual_initial_step_size_taken"] = number(s.actual_initial_step_size_taken);
+  j["newton_solves"] = s.newton_solves;
+  j["velocity_map_evaluations"] = s.velocity_map_evaluations;
+  j["mass_matrix_assemblies"] = s.mass_matrix_assemblies;
+  j["symbolic_analyses"] = s.symbolic_analyses;
+  j["linear_solves"] = s.linear_solves;
+  j["dense_output_evaluations"] = s.dense_output_evaluations;
+  j["jacobian_approximated_terms"] = s.jacobian_approximated_terms;
+  j["iteration_matrix_nonzeros"] = s.iteration_matrix_nonzeros;
+  j["factor_nonzeros"] = s.factor_nonzeros;
+  j["jacobian_seconds"] = number(s.jacobian_seconds);
+  j["assembly_seconds"] = number(s.assembly_seconds);
+  j["factorization_seconds"] = number(s.factorization_seconds);
+  j["solve_seconds"] = number(s.solve_seconds);
+  j["derivative_seconds"] = number(s.derivative_seconds);
+  return j;
+}
+
+json integrator_json(const IntegratorReport& r) {
+  json j;
+  j["method"] = r.method;
+  j["mode"] = r.mode;
+  j["error_estimate"] = r.error_estimate;
+  j["extrapolated"] = r.extrapolated;
+  j["jacobian_scheme"] = r.jacobian_scheme;
+  j["newton_form"] = r.newton_form;
+  j["linear_solver"] = {{"chosen", r.linear_solver},
+                        {"reason", r.linear_solver_reason},
+                        {"fallback", r.linear_solver_fallback}};
+  return j;
+}
+
+}  // namespace
+
+std::string stats_json(const RunSummary& s) {
+  json j;
+  j["scene"] = s.scene;
+  j["dofs"] = {{"nq", s.dofs.nq}, {"nv", s.dofs.nv}, {"nz", s.dofs.nz}};
+  j["integrator"] = integrator_json(s.report);
+  j["settings"] = {{"accuracy", number(s.accuracy)},
+                   {"step", number(s.step)},
+                   {"sample_period", number(s.sample_period)}};
+  j["nnz"] = {{"iteration_matrix", s.statistics.iteration_matrix_nonzeros},
+              {"factor", s.statistics.factor_nonzeros}};
+  j["wall_time_s"] = {{"total", number(s.wall_seconds)},
+                      {"jacobian", number(s.statistics.jacobian_seconds)},
+                      {"assembly", number(s.statistics.assembly_seconds)},
+                      {"factorization", number(s.statistics.factorization_seconds)},
+                      {"solve", number(s.statistics.solve_seconds)},
+                      {"derivative", number(s.statistics.derivative_seconds)}};
+  j["statistics"] = statistics_json(s.statistics);
+  j["skipped"] = s.report.skipped;
+  j["energy"] = {{"start", number(s.energy_start)}, {"end", number(s.energy_end)}};
+  j["samples"] = s.samples;
+  j["t_final"] = number(s.t_final);
+  j["t_reached"] = number(s.t_reached);
+  j["stopped_early"] = s.stopped_early;
+  j["stop_reason"] = s.stopped_early ? json(s.stop_reason) : json(nullptr);
+  return j.dump(2) + "\n";
+}
+
+StatsWriter::StatsWriter(std::string path) : path_(std::move(path)), temp_path_(path_ + ".tmp") {
+  std::FILE* file = std::fopen(temp_path_.c_str(), "wb");
+  if (file == nullptr) {
+    throw InputError(path_ + ": cannot create the stats file (" + std::strerror(errno) + ")");
+  }
+  std::fclose(file);
+  pending_ = true;
+}
+
+StatsWriter::~StatsWriter() {
+  if (pending_) std::remove(temp_path_.c_str());
+}
+
+void StatsWriter::write(const RunSummary& summary) {
+  if (!pending_) throw std::logic_error("StatsWriter::write called twice");
+  const std::string text = stats_json(summary);
+  std::FILE* file = std::fopen(temp_path_.c_str(), "wb");
+  if (file == nullptr) {
+    throw std::runtime_error(temp_path_ + ": cannot write (" + std::strerror(errno) + ")");
+  }
+  const bool written = std::fwrite(text.data(), 1, text.size(), file) == text.size();
+  const bool closed = std::fclose(file) == 0;
+  if (!written || !closed) {
+    throw std::runtime_error(temp_path_ + ": write failed (" + std::strerror(errno) + ")");
+  }
+  std::error_code error;
+  std::filesystem::rename(temp_path_, path_, error);
+  if (error) {
+    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" +
+                             error.message() + ")");
+  }
+  pending_ = false;
+}
+
+}  // namespace stiffsim

@@ -1,0 +1,262 @@
+#include "stiffsim/linalg/cholmod_solver.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace stiffsim {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+std::string cholmod_error(const char* call, int status) {
+  return std::string("CholmodSolver: ") + call + " failed with CHOLMOD status " +
+         std::to_string(status);
+}
+
+// cholmod_rcond is the ratio of the smallest to the largest pivot of A (D in
+// LDL^T, the squared diagonal of L in LL^T). Rounding leaves pivots of about
+// n * epsilon, rarely exact zeros, when A is singular, so CHOLMOD's own zero
+// test alone misses most singular matrices; at or below that ratio, A cannot
+// be told from singular (the same test as the other solvers).
+bool pivot_ratio_acceptable(double rcond, int n) {
+  return rcond > n * std::numeric_limits<double>::epsilon();  // false for NaN too
+}
+
+std::string format_ratio(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g", value);
+  return text;
+}
+
+}  // namespace
+
+CholmodSolver::CholmodSolver() {
+  cholmod_start(&common_);
+  // Failures become exceptions or return values carrying the status; CHOLMOD's
+  // own messages would go to stdout, which the CLI may use for results.
+  common_.print = 0;
+  common_.supernodal = CHOLMOD_SUPERNODAL;
+  common_.final_ll = true;
+}
+
+CholmodSolver::~CholmodSolver() {
+  free_factor_and_workspace();
+  cholmod_finish(&common_);
+}
+
+void CholmodSolver::free_factor_and_workspace() {
+  cholmod_free_factor(&factor_, &common_);
+  cholmod_free_dense(&solution_, &common_);
+  cholmod_free_dense(&solve_workspace_y_, &common_);
+  cholmod_free_dense(&solve_workspace_e_, &common_);
+}
+
+cholmod_sparse CholmodSolver::wrap(const SparseMatrix& A) const {
+  // CHOLMOD takes non-const pointers but reads A only (analyze, factorize).
+  cholmod_sparse header{};
+  header.nrow = static_cast<size_t>(A.rows());
+  header.ncol = static_cast<size_t>(A.cols());
+  header.nzmax = static_cast<size_t>(A.nonZeros());
+  header.p = const_cast<int*>(A.outerIndexPtr());
+  header.i = const_cast<int*>(A.innerIndexPtr());
+  header.nz = nullptr;
+  header.x = const_cast<double*>(A.valuePtr());
+  header.z = nullptr;
+  // The Eigen matrix holds both triangles; -1 makes CHOLMOD read the lower one
+  // and ignore the rest, which saves building a triangular copy.
+  header.stype = -1;
+  header.itype = CHOLMOD_INT;
+  header.xtype = CHOLMOD_REAL;
+  header.dtype = CHOLMOD_DOUBLE;
+  header.sorted = 1;
+  header.packed = 1;
+  return header;
+}
+
+void CholmodSolver::analyze(const SparseMatrix& pattern) {
+  if (pattern.rows() != pattern.cols() || !pattern.isCompressed()) {
+    throw std::invalid_argument(
+        "CholmodSolver::analyze: matrix is " + std::to_string(pattern.rows()) + " x " +
+        std::to_string(pattern.cols()) + (pattern.isCompressed() ? "" : " and not compressed") +
+        "; a square compressed matrix is required");
+  }
+  const auto start = Clock::now();
+  n_ = static_cast<int>(pattern.rows());
+  outer_.assign(pattern.outerIndexPtr(), pattern.outerIndexPtr() + n_ + 1);
+  inner_.assign(pattern.innerIndexPtr(), pattern.innerIndexPtr() + pattern.nonZeros());
+  factored_ = false;
+  if (mode_ == Mode::kUmfpack) {
+    umfpack_->analyze(pattern);
+  } else {
+    analyze_with_cholmod(pattern);
+  }
+  ++counters_.analyses;
+  counters_.analysis_seconds += seconds_since(start);
+}
+
+void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
+  free_factor_and_workspace();
+  if (mode_ == Mode::kLDLT) {
+    common_.supernodal = CHOLMOD_SIMPLICIAL;
+    common_.final_ll = false;
+  } else {
+    common_.supernodal = CHOLMOD_SUPERNODAL;
+    common_.final_ll = true;
+  }
+  cholmod_sparse header = wrap(pattern);
+  factor_ = cholmod_analyze(&header, &common_);
+  if (factor_ == nullptr)
+    throw std::runtime_error(cholmod_error("cholmod_analyze", common_.status));
+}
+
+bool CholmodSolver::factorize(const SparseMatrix& A) {
+  if (n_ < 0) throw std::logic_error("CholmodSolver::factorize called before analyze");
+  if (A.rows() != n_ || A.cols() != n_ || !A.isCompressed() ||
+      A.nonZeros() != static_cast<Eigen::Index>(inner_.size()) ||
+      !std::equal(outer_.begin(), outer_.end(), A.outerIndexPtr()) ||
+      !std::equal(inner_.begin(), inner_.end(), A.innerIndexPtr())) {
+    throw std::invalid_argument(
+        "CholmodSolver::factorize: the matrix's pattern differs from the analyzed one");
+  }
+  const auto start = Clock::now();
+  const double analysis_seconds_before = counters_.analysis_seconds;
+  ++counters_.factorizations;
+  // CHOLMOD does not test for NaN/Inf: it would return a factor full of NaN.
+  const double* values = A.valuePtr();
+  const bool finite =
+      std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); });
+  factored_ = finite && factorize_with_fallback(A);
+  // A fallback's re-analysis is already in analysis_seconds.
+  counters_.factorization_seconds +=
+      seconds_since(start) - (counters_.analysis_seconds - analysis_seconds_before);
+  return factored_;
+}
+
+bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
+  if (mode_ == Mode::kUmfpack) return umfpack_->factorize(A);
+
+  cholmod_sparse header = wrap(A);
+  cholmod_factorize(&header, factor_, &common_);
+  if (common_.status < CHOLMOD_OK) {
+    throw std::runtime_error(cholmod_error("cholmod_factorize", common_.status));
+  }
+  // minor < n is where the factorization stopped; the status says so too.
+  const bool pivot_failed = common_.status == CHOLMOD_NOT_POSDEF || factor_->minor < factor_->n;
+  const std::string at_factorization =
+      " at factorization " + std::to_string(counters_.factorizations);
+  const std::string pivot_position =
+      "pivot " + std::to_string(factor_->minor + 1) + " of " + std::to_string(n_);
+
+  if (mode_ == Mode::kSupernodalLLT) {
+    if (!pivot_failed) return pivot_ratio_acceptable(cholmod_rcond(factor_, &common_), n_);
+    switch_mode(Mode::kLDLT,
+                "matrix not positive definite (" + pivot_position + ")" + at_factorization);
+    const auto start = Clock::now();
+    analyze_with_cholmod(A);
+    ++counters_.analyses;
+    counters_.analysis_seconds += seconds_since(start);
+    return factorize_with_fallback(A);
+  }
+
+  // Simplicial LDL^T does not pivot, so a zero or tiny pivot may come from the
+  // elimination order rather than from A; UMFPACK's pivoting may still succeed.
+  const double rcond = pivot_failed ? 0.0 : cholmod_rcond(factor_, &common_);
+  if (!pivot_failed && pivot_ratio_acceptable(rcond, n_)) return true;
+  switch_mode(Mode::kUmfpack,
+              (pivot_failed ? "CHOLMOD LDL^T met a zero pivot (" + pivot_position + ")"
+                            : "CHOLMOD LDL^T pivot ratio " + format_ratio(rcond) +
+                                  " is at most n * epsilon") +
+                  at_factorization);
+  free_factor_and_workspace();
+  umfpack_ = std::make_unique<UmfpackSolver>();
+  const auto start = Clock::now();
+  umfpack_->analyze(A);
+  ++counters_.analyses;
+  counters_.analysis_seconds += seconds_since(start);
+  return umfpack_->factorize(A);
+}
+
+void CholmodSolver::switch_mode(Mode next, const std::string& why) {
+  auto describe = [](Mode mode) {
+    switch (mode) {
+      case Mode::kSupernodalLLT:
+        return "CHOLMOD supernodal LL^T";
+      case Mode::kLDLT:
+        return "CHOLMOD LDL^T";
+      case Mode::kUmfpack:
+        return "UMFPACK";
+    }
+    return "?";
+  };
+  const std::string sentence = why + ": switched from " + describe(mode_) + " to " + describe(next);
+  mode_ = next;
+  // Said once per switch: the solver never switches back.
+  std::fprintf(stderr, "stiffsim: %s\n", sentence.c_str());
+  fallback_note_ = fallback_note_.empty() ? sentence : fallback_note_ + "; then " + sentence;
+}
+
+void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
+  if (!factored_) {
+    throw std::logic_error("CholmodSolver::solve called without a successful factorize()");
+  }
+  if (b.size() != n_) {
+    throw std::invalid_argument("CholmodSolver::solve: right-hand side has size " +
+                                std::to_string(b.size()) + ", expected " + std::to_string(n_));
+  }
+  const auto start = Clock::now();
+  if (mode_ == Mode::kUmfpack) {
+    umfpack_->solve(b, x);
+  } else {
+    cholmod_dense rhs{};
+    rhs.nrow = static_cast<size_t>(n_);
+    rhs.ncol = 1;
+    rhs.nzmax = static_cast<size_t>(n_);
+    rhs.d = static_cast<size_t>(n_);
+    rhs.x = const_cast<double*>(b.data());  // read only
+    rhs.z = nullptr;
+    rhs.xtype = CHOLMOD_REAL;
+    rhs.dtype = CHOLMOD_DOUBLE;
+    if (!cholmod_solve2(CHOLMOD_A, factor_, &rhs, nullptr, &solution_, nullptr, &solve_workspace_y_,
+                        &solve_workspace_e_, &common_)) {
+      throw std::runtime_error(cholmod_error("cholmod_solve2", common_.status));
+    }
+    if (x->size() != n_) x->resize(n_);
+    const double* solution = static_cast<const double*>(solution_->x);
+    std::copy(solution, solution + n_, x->data());
+  }
+  ++counters_.solves;
+  counters_.solve_seconds += seconds_since(start);
+}
+
+std::string CholmodSolver::method() const {
+  switch (mode_) {
+    case Mode::kSupernodalLLT:
+      return "cholmod-supernodal-llt";
+    case Mode::kLDLT:
+      return "cholmod-ldlt";
+    case Mode::kUmfpack:
+      return "umfpack";
+  }
+  return "cholmod";
+}
+
+long CholmodSolver::factor_nonzeros() const {
+  if (!factored_) return 0;
+  if (mode_ == Mode::kUmfpack) return umfpack_->factor_nonzeros();
+  if (factor_->is_super) return static_cast<long>(factor_->xsize);
+  const int* column_counts = static_cast<const int*>(factor_->nz);
+  long total = 0;
+  for (size_t j = 0; j < factor_->n; ++j) total += column_counts[j];
+  return total;
+}
+
+}  // namespace stiffsim

@@ -1,0 +1,130 @@
+#include "stiffsim/linalg/linear_solver.h"
+
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+
+#include "stiffsim/linalg/cholmod_solver.h"
+#include "stiffsim/linalg/dense_solvers.h"
+#include "stiffsim/linalg/umfpack_solver.h"
+
+namespace stiffsim {
+namespace {
+
+// Below this size a dense factorization beats the symbolic bookkeeping of a
+// sparse one; above this density the fill-in makes the factor dense anyway.
+constexpr long kDenseMaxSize = 200;
+constexpr double kDenseMinDensity = 0.1;
+
+std::string format_percent(double fraction) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g%%", 100.0 * fraction);
+  return text;
+}
+
+std::unique_ptr<LinearSolver> construct(LinearSolverKind kind) {
+  switch (kind) {
+    case LinearSolverKind::kDenseLU:
+      return std::make_unique<DenseLUSolver>();
+    case LinearSolverKind::kDenseLDLT:
+      return std::make_unique<DenseLDLTSolver>();
+    case LinearSolverKind::kCholmod:
+      return std::make_unique<CholmodSolver>();
+    case LinearSolverKind::kUmfpack:
+      return std::make_unique<UmfpackSolver>();
+    case LinearSolverKind::kAuto:
+      break;
+  }
+  throw std::logic_error("construct: kAuto has no solver of its own");
+}
+
+std::string describe(LinearSolverKind kind) {
+  switch (kind) {
+    case LinearSolverKind::kDenseLU:
+      return "dense LU";
+    case LinearSolverKind::kDenseLDLT:
+      return "dense LDLT";
+    case LinearSolverKind::kCholmod:
+      return "CHOLMOD supernodal LL^T";
+    case LinearSolverKind::kUmfpack:
+      return "UMFPACK";
+    case LinearSolverKind::kAuto:
+      break;
+  }
+  return "auto";
+}
+
+}  // namespace
+
+LinearSolverKind parse_linear_solver_kind(const std::string& name) {
+  if (name == "auto") return LinearSolverKind::kAuto;
+  // "dense" is the safe dense choice: LU needs neither symmetry nor
+  // definiteness. Ask for "dense-ldlt" explicitly to get LDLT.
+  if (name == "dense" || name == "dense-lu") return LinearSolverKind::kDenseLU;
+  if (name == "dense-ldlt") return LinearSolverKind::kDenseLDLT;
+  if (name == "cholmod") return LinearSolverKind::kCholmod;
+  if (name == "umfpack") return LinearSolverKind::kUmfpack;
+  throw std::invalid_argument("unknown linear solver '" + name +
+                              "'; expected one of: auto, dense, dense-lu, dense-ldlt, "
+                              "cholmod, umfpack");
+}
+
+std::string to_string(LinearSolverKind kind) {
+  switch (kind) {
+    case LinearSolverKind::kAuto:
+      return "auto";
+    case LinearSolverKind::kDenseLU:
+      return "dense-lu";
+    case LinearSolverKind::kDenseLDLT:
+      return "dense-ldlt";
+    case LinearSolverKind::kCholmod:
+      return "cholmod";
+    case LinearSolverKind::kUmfpack:
+      return "umfpack";
+  }
+  return "unknown";
+}
+
+LinearSolverChoice make_linear_solver(LinearSolverKind kind, const SparseMatrix& pattern,
+                                      bool symmetric) {
+  if (pattern.rows() != pattern.cols()) {
+    throw std::invalid_argument("make_linear_solver: matrix is " + std::to_string(pattern.rows()) +
+                                " x " + std::to_string(pattern.cols()) + ", not square");
+  }
+  const std::string symmetry = symmetric ? "symmetric" : "unsymmetric";
+  if (kind != LinearSolverKind::kAuto) {
+    if (!symmetric &&
+        (kind == LinearSolverKind::kCholmod || kind == LinearSolverKind::kDenseLDLT)) {
+      throw std::invalid_argument("linear solver '" + to_string(kind) +
+                                  "' needs a symmetric matrix; use 'umfpack', 'dense-lu' "
+                                  "or 'auto' for this unsymmetric one");
+    }
+    return {construct(kind), "requested " + to_string(kind) + " (" + symmetry + ")"};
+  }
+
+  const long n = static_cast<long>(pattern.rows());
+  const double density =
+      n == 0 ? 1.0 : static_cast<double>(pattern.nonZeros()) / (static_cast<double>(n) * n);
+  const std::string size = "n = " + std::to_string(n);
+  const std::string fill = "density " + format_percent(density);
+  const bool dense = n <= kDenseMaxSize || density > kDenseMinDensity;
+  std::string why;
+  if (n <= kDenseMaxSize) {
+    why = size + " <= " + std::to_string(kDenseMaxSize);
+  } else if (dense) {
+    why = size + " > " + std::to_string(kDenseMaxSize) + " but " + fill + " > " +
+          format_percent(kDenseMinDensity);
+  } else {
+    why = size + " > " + std::to_string(kDenseMaxSize) + " and " + fill +
+          " <= " + format_percent(kDenseMinDensity);
+  }
+  LinearSolverKind picked;
+  if (dense) {
+    picked = symmetric ? LinearSolverKind::kDenseLDLT : LinearSolverKind::kDenseLU;
+  } else {
+    picked = symmetric ? LinearSolverKind::kCholmod : LinearSolverKind::kUmfpack;
+  }
+  return {construct(picked), why + ", " + symmetry + ": " + describe(picked)};
+}
+
+}  // namespace stiffsim

@@ -1,0 +1,152 @@
+#include "stiffsim/linalg/sparse_pattern.h"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+namespace stiffsim {
+namespace {
+
+std::string position(int row, int col) {
+  return "(" + std::to_string(row) + ", " + std::to_string(col) + ")";
+}
+
+// Storage range [begin, end) of column `col`; handles uncompressed matrices
+// too so that helpers never silently read stale entries.
+std::pair<int, int> column_range(const SparseMatrix& A, int col) {
+  const int begin = A.outerIndexPtr()[col];
+  const int end = A.isCompressed() ? A.outerIndexPtr()[col + 1] : begin + A.innerNonZeroPtr()[col];
+  return {begin, end};
+}
+
+// Slot of `row` in column `col`, or -1. Row indices are sorted within a column
+// (Eigen keeps them sorted, and build() does too), so binary search applies.
+int find_slot(const SparseMatrix& A, int row, int col) {
+  const auto [begin, end] = column_range(A, col);
+  const int* first = A.innerIndexPtr() + begin;
+  const int* last = A.innerIndexPtr() + end;
+  const int* it = std::lower_bound(first, last, row);
+  if (it == last || *it != row) return -1;
+  return static_cast<int>(it - A.innerIndexPtr());
+}
+
+}  // namespace
+
+void PatternBuilder::add(int row, int col) {
+  if (row < 0 || row >= rows_ || col < 0 || col >= cols_) {
+    throw std::out_of_range("PatternBuilder::add: entry " + position(row, col) + " outside a " +
+                            std::to_string(rows_) + " x " + std::to_string(cols_) + " pattern");
+  }
+  entries_.emplace_back(col, row);
+}
+
+void PatternBuilder::add_block(int row0, int col0, int rows, int cols) {
+  if (rows < 0 || cols < 0) {
+    throw std::invalid_argument("PatternBuilder::add_block: negative block size " +
+                                std::to_string(rows) + " x " + std::to_string(cols));
+  }
+  for (int j = 0; j < cols; ++j) {
+    for (int i = 0; i < rows; ++i) add(row0 + i, col0 + j);
+  }
+}
+
+void PatternBuilder::add_pattern(const SparseMatrix& pattern, int row0, int col0) {
+  for (int j = 0; j < pattern.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(pattern, j); it; ++it) {
+      add(row0 + it.row(), col0 + it.col());
+    }
+  }
+}
+
+void PatternBuilder::add_diagonal(int first, int count) {
+  if (count < 0) {
+    throw std::invalid_argument("PatternBuilder::add_diagonal: negative count " +
+                                std::to_string(count));
+  }
+  for (int k = first; k < first + count; ++k) add(k, k);
+}
+
+SparseMatrix PatternBuilder::build() const {
+  // Sorting a copy keeps build() const and lets the builder be reused.
+  std::vector<std::pair<int, int>> sorted = entries_;
+  std::sort(sorted.begin(), sorted.end());
+  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
+
+  SparseMatrix A(rows_, cols_);
+  A.resizeNonZeros(static_cast<Eigen::Index>(sorted.size()));
+  int* outer = A.outerIndexPtr();
+  int* inner = A.innerIndexPtr();
+  std::fill(outer, outer + cols_ + 1, 0);
+  for (std::size_t k = 0; k < sorted.size(); ++k) {
+    ++outer[sorted[k].first + 1];
+    inner[k] = sorted[k].second;
+  }
+  for (int j = 0; j < cols_; ++j) outer[j + 1] += outer[j];
+  std::fill(A.valuePtr(), A.valuePtr() + sorted.size(), 0.0);
+  return A;
+}
+
+int slot_of(const SparseMatrix& A, int row, int col) {
+  const int slot =
+      (row >= 0 && row < A.rows() && col >= 0 && col < A.cols()) ? find_slot(A, row, col) : -1;
+  if (slot < 0) {
+    throw std::out_of_range("slot_of: entry " + position(row, col) + " is not in the " +
+                            std::to_string(A.rows()) + " x " + std::to_string(A.cols()) +
+                            " pattern");
+  }
+  return slot;
+}
+
+std::vector<int> slots_in(const SparseMatrix& whole, const SparseMatrix& part, int row0, int col0) {
+  if (row0 < 0 || col0 < 0 || row0 + part.rows() > whole.rows() ||
+      col0 + part.cols() > whole.cols()) {
+    throw std::invalid_argument("slots_in: a " + std::to_string(part.rows()) + " x " +
+                                std::to_string(part.cols()) + " part at " + position(row0, col0) +
+                                " does not fit in a " + std::to_string(whole.rows()) + " x " +
+                                std::to_string(whole.cols()) + " matrix");
+  }
+  std::vector<int> slots;
+  slots.reserve(static_cast<std::size_t>(part.nonZeros()));
+  for (int j = 0; j < part.outerSize(); ++j) {
+    // Both columns are sorted, so one merge walk finds every slot.
+    auto [w, w_end] = column_range(whole, col0 + j);
+    for (SparseMatrix::InnerIterator it(part, j); it; ++it) {
+      const int row = row0 + it.row();
+      while (w < w_end && whole.innerIndexPtr()[w] < row) ++w;
+      if (w == w_end || whole.innerIndexPtr()[w] != row) {
+        throw std::invalid_argument("slots_in: entry " + position(it.row(), it.col()) +
+                                    " of the part (" + position(row, col0 + j) +
+                                    " of the whole) is missing from the whole pattern");
+      }
+      slots.push_back(w);
+    }
+  }
+  return slots;
+}
+
+void scatter_add(const SparseMatrix& part, const std::vector<int>& slots, double scale,
+                 SparseMatrix* whole) {
+  // Only the cheap size check: this runs in the hot path, and slots come from
+  // slots_in(), which has validated every position already.
+  if (static_cast<Eigen::Index>(slots.size()) != part.nonZeros() || !part.isCompressed()) {
+    throw std::invalid_argument("scatter_add: " + std::to_string(slots.size()) +
+                                " slots for a compressed part with " +
+                                std::to_string(part.nonZeros()) + " stored entries required");
+  }
+  const double* values = part.valuePtr();
+  double* target = whole->valuePtr();
+  const std::size_t count = slots.size();
+  for (std::size_t k = 0; k < count; ++k) target[slots[k]] += scale * values[k];
+}
+
+bool is_structurally_symmetric(const SparseMatrix& A) {
+  if (A.rows() != A.cols()) return false;
+  for (int j = 0; j < A.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(A, j); it; ++it) {
+      if (find_slot(A, j, static_cast<int>(it.row())) < 0) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace stiffsim

@@ -1,0 +1,342 @@
+#include "stiffsim/model/particles.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "stiffsim/error.h"
+
+namespace stiffsim {
+
+namespace {
+
+// Same bound as the builders: a typo in a node count must fail with a message,
+// not try to allocate terabytes (and 3 * nodes must fit in an int index).
+constexpr long kMaxNodes = 10'000'000;
+
+// Below this length a spring counts as collapsed: its direction is undefined
+// and L/l would overflow. Far below any physical length, far above underflow.
+constexpr double kCollapsedLength = 1e-100;
+
+// Block order inside spring_slots_ (and the sign of each block in K and D).
+enum Block { kAA = 0, kAB = 1, kBA = 2, kBB = 3 };
+constexpr double kBlockSign[4] = {-1.0, +1.0, +1.0, -1.0};
+
+std::string node_range(int n) {
+  std::ostringstream s;
+  s << "[0, " << n << ")";
+  return s.str();
+}
+
+[[noreturn]] void fail(const std::string& component, const std::string& what) {
+  throw InputError((component.empty() ? std::string("particles") : component) + ": " + what);
+}
+
+std::string str(double x) {
+  std::ostringstream s;
+  s << x;
+  return s.str();
+}
+
+// Geometry of one spring at the current positions. A collapsed spring gets
+// u = 0, so both its elastic and damping forces vanish (the direction of
+// k (l - L) u is undefined there), and collapsed = true so the Jacobian can
+// pick a finite value.
+struct SpringFrame {
+  Eigen::Vector3d u;
+  double l;
+  bool collapsed;
+};
+
+SpringFrame spring_frame(const Eigen::Vector3d& xa, const Eigen::Vector3d& xb) {
+  const Eigen::Vector3d d = xb - xa;
+  const double l = d.norm();
+  if (!(l > kCollapsedLength)) return {Eigen::Vector3d::Zero(), l, true};
+  return {d / l, l, false};
+}
+
+}  // namespace
+
+ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::move(description)) {
+  const std::string& who = desc_.name;
+  const long n = static_cast<long>(desc_.positions.size());
+  if (n == 0) fail(who, "has no nodes");
+  if (n > kMaxNodes) {
+    fail(who, std::to_string(n) + " nodes exceed the limit of " + std::to_string(kMaxNodes));
+  }
+  const int nodes = static_cast<int>(n);
+  if (desc_.masses.size() != desc_.positions.size()) {
+    fail(who, std::to_string(desc_.masses.size()) + " masses given for " + std::to_string(nodes) +
+                  " nodes");
+  }
+  for (int i = 0; i < nodes; ++i) {
+    if (!desc_.positions[i].allFinite()) {
+      fail(who, "position of node " + std::to_string(i) + " is not finite");
+    }
+    const double m = desc_.masses[i];
+    if (!(std::isfinite(m) && m > 0.0)) {
+      fail(who,
+           "mass of node " + std::to_string(i) + " must be finite and > 0 (got " + str(m) + ")");
+    }
+  }
+  for (size_t s = 0; s < desc_.springs.size(); ++s) {
+    const Spring& sp = desc_.springs[s];
+    const std::string tag = "spring " + std::to_string(s) + ": ";
+    for (int end : {sp.a, sp.b}) {
+      if (end < 0 || end >= nodes) {
+        fail(who, tag + "node " + std::to_string(end) + " out of range " + node_range(nodes));
+      }
+    }
+    if (sp.a == sp.b) fail(who, tag + "connects node " + std::to_string(sp.a) + " to itself");
+    if (!(std::isfinite(sp.k) && sp.k >= 0.0)) {
+      fail(who, tag + "stiffness k must be finite and >= 0 (got " + str(sp.k) + ")");
+    }
+    if (!(std::isfinite(sp.c) && sp.c >= 0.0)) {
+      fail(who, tag + "damping c must be finite and >= 0 (got " + str(sp.c) + ")");
+    }
+    // Zero is legal (a zero-rest-length spring, even between coincident
+    // nodes): its force k d is smooth everywhere.
+    if (!(std::isfinite(sp.rest_length) && sp.rest_length >= 0.0)) {
+      fail(who, tag + "rest length must be finite and >= 0 (got " + str(sp.rest_length) + ")");
+    }
+  }
+  for (int p : desc_.pinned) {
+    if (p < 0 || p >= nodes) {
+      fail(who, "pinned node " + std::to_string(p) + " out of range " + node_range(nodes));
+    }
+  }
+  if (!desc_.gravity.allFinite()) fail(who, "gravity is not finite");
+  if (!(std::isfinite(desc_.drag) && desc_.drag >= 0.0)) {
+    fail(who, "drag must be finite and >= 0 (got " + str(desc_.drag) + ")");
+  }
+
+  // DOFs: free nodes in node order (duplicate pins are harmless).
+  std::vector<char> is_pinned(nodes, 0);
+  for (int p : desc_.pinned) is_pinned[p] = 1;
+  dof_of_node_.assign(nodes, -1);
+  for (int i = 0; i < nodes; ++i) {
+    if (!is_pinned[i]) dof_of_node_[i] = 3 * free_nodes_++;
+  }
+  const int nv = 3 * free_nodes_;
+
+  PatternBuilder mass(nv, nv);
+  mass.add_diagonal(0, nv);
+  mass_pattern_ = mass.build();
+
+  // K and D share one pattern: the 3x3 diagonal block of every free node
+  // (drag and springs to pinned nodes land there) and both off-diagonal
+  // blocks of every spring between two free nodes.
+  PatternBuilder jac(nv, nv);
+  for (int i = 0; i < nodes; ++i) {
+    if (dof_of_node_[i] >= 0) jac.add_block(dof_of_node_[i], dof_of_node_[i], 3, 3);
+  }
+  for (const Spring& sp : desc_.springs) {
+    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
+    if (da >= 0 && db >= 0) {
+      jac.add_block(da, db, 3, 3);
+      jac.add_block(db, da, 3, 3);
+    }
+  }
+  jacobian_pattern_ = empty_jacobians(dimensions());
+  jacobian_pattern_.dF_dq = jac.build();
+  jacobian_pattern_.dF_dv = jacobian_pattern_.dF_dq;
+
+  const SparseMatrix& K = jacobian_pattern_.dF_dq;
+  auto block_slots = [&K](int row0, int col0, int* out) {
+    for (int c = 0; c < 3; ++c) {
+      for (int r = 0; r < 3; ++r) out[r + 3 * c] = slot_of(K, row0 + r, col0 + c);
+    }
+  };
+  spring_slots_.resize(desc_.springs.size());
+  for (size_t s = 0; s < desc_.springs.size(); ++s) {
+    std::array<int, 36>& slots = spring_slots_[s];
+    slots.fill(-1);
+    const int da = dof_of_node_[desc_.springs[s].a], db = dof_of_node_[desc_.springs[s].b];
+    if (da >= 0) block_slots(da, da, &slots[9 * kAA]);
+    if (da >= 0 && db >= 0) {
+      block_slots(da, db, &slots[9 * kAB]);
+      block_slots(db, da, &slots[9 * kBA]);
+    }
+    if (db >= 0) block_slots(db, db, &slots[9 * kBB]);
+  }
+  diagonal_slots_.resize(nv);
+  for (int i = 0; i < nv; ++i) diagonal_slots_[i] = slot_of(K, i, i);
+  free_mass_.resize(nv);
+  for (int i = 0; i < nodes; ++i) {
+    if (dof_of_node_[i] >= 0) free_mass_.segment<3>(dof_of_node_[i]).setConstant(desc_.masses[i]);
+  }
+}
+
+Dimensions ParticleSystem::dimensions() const {
+  Dimensions d;
+  d.nq = d.nv = 3 * free_nodes_;
+  return d;
+}
+
+Capabilities ParticleSystem::capabilities() const {
+  Capabilities c;
+  c.identity_velocity_map = true;
+  c.constant_mass_matrix = true;
+  c.diagonal_mass_matrix = true;
+  c.symmetric_jacobians = true;
+  c.analytic_jacobians = true;
+  c.has_energy = true;
+  return c;
+}
+
+State ParticleSystem::initial_state() const {
+  const Dimensions d = dimensions();
+  State s(0.0, Eigen::VectorXd::Zero(d.nx()));
+  for (int i = 0; i < node_count(); ++i) {
+    if (dof_of_node_[i] >= 0) s.x.segment<3>(dof_of_node_[i]) = desc_.positions[i];
+  }
+  return s;
+}
+
+std::vector<std::string> ParticleSystem::position_names() const {
+  static const char* const kAxes[3] = {"x", "y", "z"};
+  std::vector<std::string> names;
+  names.reserve(3 * free_nodes_);
+  for (int i = 0; i < node_count(); ++i) {
+    if (dof_of_node_[i] < 0) continue;
+    for (const char* axis : kAxes)
+      names.push_back(desc_.name + "/n" + std::to_string(i) + "/" + axis);
+  }
+  return names;
+}
+
+// Velocities carry the same names; the CSV tells them apart by "q:" / "v:".
+std::vector<std::string> ParticleSystem::velocity_names() const { return position_names(); }
+
+const SparseMatrix& ParticleSystem::mass_matrix_pattern() const { return mass_pattern_; }
+
+void ParticleSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
+  (void)q;
+  if (M->rows() != free_mass_.size() || M->nonZeros() != free_mass_.size()) {
+    throw std::logic_error(name() + ": mass_matrix() needs a matrix with mass_matrix_pattern()");
+  }
+  // A diagonal pattern stores exactly one entry per column, in column order.
+  std::copy(free_mass_.data(), free_mass_.data() + free_mass_.size(), M->valuePtr());
+}
+
+void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                            const ConstVectorRef& z, VectorRef F) const {
+  (void)t, (void)z;
+  const double alpha = desc_.drag;
+  for (int i = 0; i < node_count(); ++i) {
+    const int di = dof_of_node_[i];
+    if (di < 0) continue;
+    F.segment<3>(di) = desc_.masses[i] * (desc_.gravity - alpha * v.segment<3>(di));
+  }
+  for (const Spring& sp : desc_.springs) {
+    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
+    if (da < 0 && db < 0) continue;  // both ends pinned: no force on any DOF
+    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
+    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
+    // Pinned nodes have zero velocity.
+    Eigen::Vector3d vab = Eigen::Vector3d::Zero();
+    if (db >= 0) vab += v.segment<3>(db);
+    if (da >= 0) vab -= v.segment<3>(da);
+    const SpringFrame f = spring_frame(xa, xb);
+    const Eigen::Vector3d fa = (sp.k * (f.l - sp.rest_length) + sp.c * vab.dot(f.u)) * f.u;
+    if (da >= 0) F.segment<3>(da) += fa;
+    if (db >= 0) F.segment<3>(db) -= fa;
+  }
+}
+
+const ForceJacobians& ParticleSystem::jacobian_pattern() const { return jacobian_pattern_; }
+
+void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                     const ConstVectorRef& z, const JacobianRequest& request,
+                                     ForceJacobians* J) const {
+  (void)t, (void)v, (void)z;
+  const SparseMatrix& P = jacobian_pattern_.dF_dq;
+  if (J->dF_dq.nonZeros() != P.nonZeros() || J->dF_dv.nonZeros() != P.nonZeros() ||
+      J->dF_dq.rows() != P.rows() || J->dF_dv.rows() != P.rows()) {
+    throw std::logic_error(name() + ": force_jacobians() needs matrices with jacobian_pattern()");
+  }
+  set_zero_keep_pattern(&J->dF_dq);
+  set_zero_keep_pattern(&J->dF_dv);
+  double* K = J->dF_dq.valuePtr();
+  double* D = J->dF_dv.valuePtr();
+
+  for (size_t i = 0; i < diagonal_slots_.size(); ++i)
+    D[diagonal_slots_[i]] = -desc_.drag * free_mass_[i];
+
+  long approximated = 0;
+  for (size_t s = 0; s < desc_.springs.size(); ++s) {
+    const Spring& sp = desc_.springs[s];
+    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
+    if (da < 0 && db < 0) continue;
+    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
+    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
+    const SpringFrame f = spring_frame(xa, xb);
+
+    // S = df_a/dx_b. The damping force c ((v_b - v_a).u) u also depends on x
+    // through u; that derivative is dropped here (MODELS.md allows it: it only
+    // slows Newton down, the residual stays exact), which is also what keeps K
+    // symmetric.
+    Eigen::Matrix3d S;
+    if (f.collapsed) {
+      // Direction undefined. k I is the exact Jacobian of a zero-rest-length
+      // spring (force k d), the only kind that can rest collapsed; for L > 0
+      // the exact transverse stiffness diverges as l -> 0, and k I is a
+      // finite, positive semidefinite stand-in for it.
+      S = sp.k * Eigen::Matrix3d::Identity();
+      if (request.definite && sp.rest_length > 0.0 && sp.k > 0.0) ++approximated;
+    } else {
+      double transverse = 1.0 - sp.rest_length / f.l;
+      if (request.definite && transverse < 0.0) {
+        // Choi & Ko 2002: a compressed spring's negative transverse stiffness
+        // can make -K indefinite; the iteration matrix drops it.
+        transverse = 0.0;
+        if (sp.k > 0.0) ++approximated;
+      }
+      const Eigen::Matrix3d uut = f.u * f.u.transpose();
+      S = sp.k * (transverse * (Eigen::Matrix3d::Identity() - uut) + uut);
+    }
+    const Eigen::Matrix3d C = sp.c * f.u * f.u.transpose();
+
+    const std::array<int, 36>& slots = spring_slots_[s];
+    for (int blk = 0; blk < 4; ++blk) {
+      const int* bs = &slots[9 * blk];
+      if (bs[0] < 0) continue;  // block touches a pinned node
+      const double sign = kBlockSign[blk];
+      for (int e = 0; e < 9; ++e) {
+        // Slots are column-major within the block; S and C are symmetric.
+        K[bs[e]] += sign * S(e % 3, e / 3);
+        D[bs[e]] += sign * C(e % 3, e / 3);
+      }
+    }
+  }
+  J->approximated_terms = approximated;
+}
+
+double ParticleSystem::energy(const State& s) const {
+  const Dimensions dims = dimensions();
+  const auto q = s.q(dims);
+  const auto v = s.v(dims);
+  auto position = [&](int i) -> Eigen::Vector3d {
+    const int di = dof_of_node_[i];
+    return di >= 0 ? Eigen::Vector3d(q.segment<3>(di)) : desc_.positions[i];
+  };
+  // Pinned nodes are included with their fixed positions: a constant offset
+  // that makes this the total energy of every particle, as a physicist would
+  // write it; differences in time are unaffected.
+  double e = 0.0;
+  for (int i = 0; i < node_count(); ++i) {
+    const int di = dof_of_node_[i];
+    const double m = desc_.masses[i];
+    if (di >= 0) e += 0.5 * m * v.segment<3>(di).squaredNorm();
+    e -= m * desc_.gravity.dot(position(i));
+  }
+  for (const Spring& sp : desc_.springs) {
+    const double stretch = (position(sp.b) - position(sp.a)).norm() - sp.rest_length;
+    e += 0.5 * sp.k * stretch * stretch;
+  }
+  return e;
+}
+
+}  // namespace stiffsim

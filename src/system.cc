@@ -1,0 +1,47 @@
+#include "stiffsim/system.h"
+
+#include <stdexcept>
+
+namespace stiffsim {
+
+void System::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
+                                  VectorRef qdot) const {
+  (void)q;
+  qdot = v;
+}
+
+const SparseMatrix& System::velocity_map_pattern() const {
+  throw std::logic_error(name() +
+                         ": velocity_map_pattern() is only defined for systems with N(q) != I; "
+                         "check capabilities().identity_velocity_map first");
+}
+
+void System::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
+  (void)q, (void)N;
+  throw std::logic_error(name() +
+                         ": velocity_map() is only defined for systems with N(q) != I; "
+                         "check capabilities().identity_velocity_map first");
+}
+
+void System::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                             const ConstVectorRef& z, const JacobianRequest& request,
+                             ForceJacobians* J) const {
+  (void)t, (void)q, (void)v, (void)z, (void)request, (void)J;
+  throw std::logic_error(name() + ": no analytic Jacobians; use a finite-difference scheme");
+}
+
+ForceJacobians empty_jacobians(const Dimensions& d) {
+  ForceJacobians J;
+  J.dF_dq.resize(d.nv, d.nq);
+  J.dF_dv.resize(d.nv, d.nv);
+  J.dF_dz.resize(d.nv, d.nz);
+  J.dfz_dq.resize(d.nz, d.nq);
+  J.dfz_dv.resize(d.nz, d.nv);
+  J.dfz_dz.resize(d.nz, d.nz);
+  for (SparseMatrix* m : {&J.dF_dq, &J.dF_dv, &J.dF_dz, &J.dfz_dq, &J.dfz_dv, &J.dfz_dz}) {
+    m->makeCompressed();
+  }
+  return J;
+}
+
+}  // namespace stiffsim

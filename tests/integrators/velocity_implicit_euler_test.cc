@@ -1,0 +1,288 @@
+// Claims about the velocity-implicit Euler integrator, each checked against a
+// closed form, an independent run or a conservation law.
+
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+
+#include "stiffsim/error.h"
+#include "stiffsim/integrators/simulator.h"
+#include "stiffsim/model/particle_meshes.h"
+#include "stiffsim/model/particles.h"
+
+namespace stiffsim {
+namespace {
+
+// One particle of mass m on a spring (k, c) to a pinned anchor, along x, no
+// gravity: m x'' = -k (x - L) - c x'.
+struct SpringDamper {
+  double m = 1.0, k = 100.0, c = 2.0, L = 1.0, x0 = 1.2;
+  std::unique_ptr<ParticleSystem> system() const {
+    ParticleDescription d;
+    d.name = "sd";
+    d.positions = {Eigen::Vector3d::Zero(), Eigen::Vector3d(x0, 0, 0)};
+    d.masses = {1.0, m};
+    d.springs = {Spring{0, 1, L, k, c}};
+    d.pinned = {0};
+    d.gravity.setZero();
+    return std::make_unique<ParticleSystem>(d);
+  }
+  // Underdamped closed form of the displacement u = x - L from u0, u'(0) = 0.
+  double position(double t) const {
+    const double zeta = c / (2 * std::sqrt(k * m)), w0 = std::sqrt(k / m);
+    const double wd = w0 * std::sqrt(1 - zeta * zeta);
+    const double u0 = x0 - L;
+    return L + std::exp(-zeta * w0 * t) *
+                   (u0 * std::cos(wd * t) + u0 * zeta * w0 / wd * std::sin(wd * t));
+  }
+};
+
+IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-10) {
+  IntegratorSettings s;
+  s.fixed_step = true;
+  s.max_step = h;
+  s.error_estimate = estimate;
+  s.accuracy = accuracy;
+  return s;
+}
+
+std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch, std::optional<SpringParameters> bend = SpringParameters{10.0, 0.05}) {
+  ClothSpec spec;
+  spec.nx = spec.ny = n;
+  spec.total_mass = 0.4;
+  spec.stretch = SpringParameters{k_stretch, 0.5};
+  spec.shear = SpringParameters{100.0, 0.1};
+  spec.bend = bend;
+  return std::make_unique<ParticleSystem>(make_cloth(spec));
+}
+
+double fitted_slope(const std::vector<double>& h, const std::vector<double>& e) {
+  // Least-squares slope of log e against log h.
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  const double n = h.size();
+  for (size_t i = 0; i < h.size(); ++i) {
+    const double x = std::log(h[i]), y = std::log(e[i]);
+    sx += x, sy += y, sxx += x * x, sxy += x * y;
+  }
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+TEST(VelocityImplicitEuler, GlobalErrorIsFirstOrderOnSpringDamper) {
+  const SpringDamper sd;
+  auto sys = sd.system();
+  std::vector<double> hs, errors;
+  for (double h = 0.01; h > 0.01 / 17; h /= 2) {
+    VelocityImplicitEuler vie(*sys, fixed(h), ImplicitSettings{});
+    vie.initialize(sys->initial_state());
+    vie.integrate_to(1.0);
+    hs.push_back(h);
+    errors.push_back(std::abs(vie.state().x[0] - sd.position(1.0)));
+  }
+  const double slope = fitted_slope(hs, errors);
+  EXPECT_GT(slope, 0.9);
+  EXPECT_LT(slope, 1.1);
+}
+
+TEST(VelocityImplicitEuler, ErrorEstimateIsSecondOrder) {
+  const SpringDamper sd;
+  auto sys = sd.system();
+  std::vector<double> estimates;
+  // For y' = lambda y the estimate is (z^2/4)(1 + 2z + O(z^2)), z = lambda h,
+  // so the ratio per halving is 4 (1 + z): |lambda| = 10 here and h <= 5e-4
+  // keeps that within 2%.
+  for (double h = 5e-4; h > 5e-4 / 17; h /= 2) {
+    VelocityImplicitEuler vie(*sys, fixed(h, true), ImplicitSettings{});
+    vie.initialize(sys->initial_state());
+    vie.step_at_most(1.0);
+    estimates.push_back(vie.error_estimate().lpNorm<Eigen::Infinity>());
+  }
+  // Local error O(h^2): each halving divides the estimate by about 4 (the
+  // O(h^3) remainder allows a few percent).
+  for (size_t i = 1; i < estimates.size(); ++i) {
+    EXPECT_NEAR(estimates[i - 1] / estimates[i], 4.0, 0.1) << "halving " << i;
+  }
+  // And it estimates the actual local error of the propagated result.
+  VelocityImplicitEuler vie(*sys, fixed(1e-3, true), ImplicitSettings{});
+  vie.initialize(sys->initial_state());
+  vie.step_at_most(1.0);
+  const double actual = vie.state().x[0] - sd.position(vie.state().t);
+  EXPECT_NEAR(vie.error_estimate()[0] / actual, 1.0, 0.1);
+}
+
+TEST(VelocityImplicitEuler, BothNewtonFormsConvergeToTheSameState) {
+  auto sys = cloth(8, 1e3);
+  // A generic moving state: the cloth a quarter second into its fall.
+  VelocityImplicitEuler warmup(*sys, fixed(1.0 / 60, false, 1e-3), ImplicitSettings{});
+  warmup.initialize(sys->initial_state());
+  warmup.integrate_to(0.25);
+  const State start = warmup.state();
+  ASSERT_GT(start.v(sys->dimensions()).norm(), 0.1);
+
+  Eigen::VectorXd result[2];
+  int i = 0;
+  for (NewtonForm form : {NewtonForm::kMassMatrix, NewtonForm::kGeneric}) {
+    ImplicitSettings implicit;
+    implicit.newton_form = form;
+    // Exact Jacobians and a Newton tolerance of 5e-11 (just above the
+    // round-off of h M^-1 F for k = 1e3), so both iterations run to the
+    // solution of the same equations rather than stop somewhere near it.
+    implicit.definite_iteration_matrix = false;
+    implicit.max_newton_iterations = 100;
+    VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-9), implicit);
+    vie.initialize(start);
+    vie.step_at_most(1.0);
+    ASSERT_EQ(vie.statistics().substep_failures, 0);
+    ASSERT_DOUBLE_EQ(vie.state().t, start.t + 1.0 / 60);
+    result[i++] = vie.state().x;
+  }
+  EXPECT_LT((result[0] - result[1]).norm(), 1e-10 * result[0].norm());
+}
+
+TEST(VelocityImplicitEuler, ReusesFactorizationsOnAClothRun) {
+  auto sys = cloth(16, 1e3);
+  IntegratorSettings s;
+  s.max_step = 1.0 / 60;
+  s.accuracy = 1e-3;
+  VelocityImplicitEuler vie(*sys, s, ImplicitSettings{});
+  vie.initialize(sys->initial_state());
+  vie.integrate_to(2.0);
+  const IntegratorStatistics& st = vie.statistics();
+  EXPECT_DOUBLE_EQ(vie.state().t, 2.0);
+  EXPECT_EQ(st.symbolic_analyses, 1);
+  EXPECT_GT(st.newton_raphson_iterations, 0);
+  EXPECT_LT(3 * st.iteration_matrix_factorizations, st.newton_raphson_iterations);
+  // Analytic Jacobians: every derivative evaluation is a residual (one per
+  // Newton iteration); none is spent on the Jacobian.
+  EXPECT_EQ(st.derivative_evaluations, st.newton_raphson_iterations);
+  EXPECT_EQ(st.derivative_evaluations_for_jacobian, 0);
+  // Every iteration solves once; three Newton solves per attempted step.
+  EXPECT_EQ(st.linear_solves, st.newton_raphson_iterations);
+  EXPECT_EQ(st.newton_solves % 1, 0);
+  EXPECT_GE(st.newton_solves, 3 * st.steps_taken);
+  EXPECT_LE(st.error_estimator_newton_raphson_iterations, st.newton_raphson_iterations);
+  EXPECT_LE(st.error_estimator_iteration_matrix_factorizations,
+            st.iteration_matrix_factorizations);
+  EXPECT_LE(st.jacobian_evaluations, st.iteration_matrix_factorizations);
+  EXPECT_LE(st.smallest_adapted_step_size_taken, st.largest_step_size_taken);
+}
+
+TEST(VelocityImplicitEuler, StiffClothNeverGainsEnergy) {
+  auto sys = cloth(16, 1e6);
+  VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), ImplicitSettings{});
+  State s = sys->initial_state();
+  vie.initialize(s);
+  const double e0 = sys->energy(s);
+  double t = 0;
+  for (int k = 0; k < 120; ++k) {
+    t += 1.0 / 60;
+    vie.step_at_most(std::min(t, 2.0));
+    ASSERT_TRUE(vie.state().x.allFinite()) << "t = " << vie.state().t;
+    // Implicit Euler dissipates; round-off of the energy sum itself is the
+    // only allowance.
+    EXPECT_LE(sys->energy(vie.state()), e0 + 1e-9 * std::abs(e0)) << "t = " << vie.state().t;
+  }
+}
+
+TEST(VelocityImplicitEuler, TighterAccuracyReducesTheError) {
+  auto sys = cloth(6, 1e3);
+  auto run = [&](double accuracy) {
+    IntegratorSettings s;
+    s.max_step = 0.02;
+    s.accuracy = accuracy;
+    VelocityImplicitEuler vie(*sys, s, ImplicitSettings{});
+    vie.initialize(sys->initial_state());
+    vie.integrate_to(0.5);
+    return vie.state().x;
+  };
+  // Reference: fixed tiny steps with the extrapolation of two first-order
+  // runs (h and h/2) to remove the leading error term.
+  auto fixed_run = [&](double h) {
+    VelocityImplicitEuler vie(*sys, fixed(h, false, 1e-10), ImplicitSettings{});
+    vie.initialize(sys->initial_state());
+    vie.integrate_to(0.5);
+    return vie.state().x;
+  };
+  const Eigen::VectorXd reference = 2 * fixed_run(2.5e-5) - fixed_run(5e-5);
+  const int nq = sys->dimensions().nq;
+  const double e_loose = (run(1e-2) - reference).head(nq).lpNorm<Eigen::Infinity>();
+  const double e_tight = (run(1e-4) - reference).head(nq).lpNorm<Eigen::Infinity>();
+  EXPECT_GT(e_loose / e_tight, 3.0) << e_loose << " vs " << e_tight;
+}
+
+TEST(VelocityImplicitEuler, CountersProveSkippedWork) {
+  auto sys = cloth(8, 1e3);
+  VelocityImplicitEuler vie(*sys, fixed(0.01, false, 1e-3), ImplicitSettings{});
+  vie.initialize(sys->initial_state());
+  vie.integrate_to(0.5);
+  const IntegratorStatistics& st = vie.statistics();
+  EXPECT_DOUBLE_EQ(vie.state().t, 0.5);
+  EXPECT_EQ(st.velocity_map_evaluations, 0);
+  EXPECT_EQ(st.mass_matrix_assemblies, 1);
+  // One Newton solve per step attempt (a failed attempt halves the step).
+  EXPECT_EQ(st.newton_solves, st.steps_taken + st.substep_failures);
+  EXPECT_LE(st.substep_failures, 2);
+  EXPECT_EQ(st.error_estimator_newton_raphson_iterations, 0);
+  EXPECT_EQ(vie.error_estimate().size(), 0);
+  const IntegratorReport r = vie.report();
+  EXPECT_EQ(r.mode, "fixed-step");
+  EXPECT_FALSE(r.error_estimate);
+  EXPECT_EQ(r.skipped.size(), 4u);
+}
+
+TEST(VelocityImplicitEuler, FullNewtonFactorsEveryIteration) {
+  auto sys = cloth(5, 1e3);
+  ImplicitSettings implicit;
+  implicit.full_newton = true;
+  VelocityImplicitEuler vie(*sys, fixed(0.01, false, 1e-6), implicit);
+  vie.initialize(sys->initial_state());
+  vie.integrate_to(0.1);
+  const IntegratorStatistics& st = vie.statistics();
+  EXPECT_EQ(st.iteration_matrix_factorizations, st.newton_raphson_iterations);
+  EXPECT_EQ(st.jacobian_evaluations, st.newton_raphson_iterations);
+}
+
+TEST(VelocityImplicitEuler, DenseOutputIsCubicAccurate) {
+  const SpringDamper sd;
+  auto sys = sd.system();
+  VelocityImplicitEuler vie(*sys, fixed(1e-3, false, 1e-12), ImplicitSettings{});
+  vie.initialize(sys->initial_state());
+  vie.step_at_most(1.0);
+  Eigen::VectorXd mid;
+  vie.interpolate(0.5e-3, &mid);
+  // The interpolant passes between the endpoints with the local error of the
+  // method (O(h^2) = 1e-6 relative to the motion of 0.2 m).
+  EXPECT_NEAR(mid[0], sd.position(0.5e-3), 1e-5);
+  Eigen::VectorXd end;
+  vie.interpolate(1e-3, &end);
+  EXPECT_EQ(end, vie.state().x);
+}
+
+TEST(VelocityImplicitEuler, FailureAtMinimumStepNamesTimeAndStep) {
+  // An absurd stiffness with an initial stretch and no damping makes a
+  // Newton iteration capped at one iteration fail at every step size.
+  SpringDamper sd;
+  sd.k = 1e12;
+  sd.x0 = 50.0;
+  auto sys = sd.system();
+  ImplicitSettings implicit;
+  implicit.max_newton_iterations = 1;
+  implicit.reuse = false;
+  IntegratorSettings s = fixed(0.1, false, 1e-12);
+  s.min_step = 1e-3;
+  VelocityImplicitEuler vie(*sys, s, implicit);
+  vie.initialize(sys->initial_state());
+  try {
+    vie.step_at_most(1.0);
+    FAIL() << "expected an IntegrationError";
+  } catch (const IntegrationError& e) {
+    EXPECT_NE(std::string(e.what()).find("t = 0"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("vie"), std::string::npos) << e.what();
+    EXPECT_LT(e.step(), 1e-3);
+  }
+}
+
+}  // namespace
+}  // namespace stiffsim

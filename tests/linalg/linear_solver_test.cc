@@ -1,0 +1,430 @@
+#include "stiffsim/linalg/linear_solver.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <memory>
+#include <random>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "stiffsim/linalg/cholmod_solver.h"
+#include "stiffsim/linalg/dense_solvers.h"
+#include "stiffsim/linalg/umfpack_solver.h"
+
+// Counting allocations: glibc lets an executable interpose malloc and reach
+// the real allocator through __libc_malloc, which catches allocations made by
+// Eigen, CHOLMOD and UMFPACK alike (operator new ends in malloc too).
+#if defined(__GLIBC__)
+#define STIFFSIM_COUNT_ALLOCATIONS 1
+namespace {
+std::atomic<bool> counting_allocations{false};
+std::atomic<long> allocation_count{0};
+}  // namespace
+extern "C" {
+void* __libc_malloc(size_t size);
+void* __libc_calloc(size_t count, size_t size);
+void* __libc_realloc(void* pointer, size_t size);
+void* malloc(size_t size) {
+  if (counting_allocations.load(std::memory_order_relaxed)) ++allocation_count;
+  return __libc_malloc(size);
+}
+void* calloc(size_t count, size_t size) {
+  if (counting_allocations.load(std::memory_order_relaxed)) ++allocation_count;
+  return __libc_calloc(count, size);
+}
+void* realloc(void* pointer, size_t size) {
+  if (counting_allocations.load(std::memory_order_relaxed)) ++allocation_count;
+  return __libc_realloc(pointer, size);
+}
+}
+#endif
+
+namespace stiffsim {
+namespace {
+
+// Residuals are relative to |b|; every system below has a condition number
+// below ~1e3, so 1e-10 leaves several digits of margin over double rounding.
+constexpr double kResidualTolerance = 1e-10;
+
+// 5-point Laplacian on an m x m grid (Dirichlet), eigenvalues in (0, 8), plus
+// `shift` on the diagonal (a vector so that values can be random), plus an
+// optional skew part `convection` on the x-neighbours (unsymmetric values,
+// symmetric pattern).
+SparseMatrix grid_matrix(int m, const Eigen::VectorXd& shift, double convection = 0.0) {
+  const int n = m * m;
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (int y = 0; y < m; ++y) {
+    for (int x = 0; x < m; ++x) {
+      const int k = y * m + x;
+      triplets.emplace_back(k, k, 4.0 + shift[k]);
+      if (x > 0) triplets.emplace_back(k, k - 1, -1.0 - convection);
+      if (x + 1 < m) triplets.emplace_back(k, k + 1, -1.0 + convection);
+      if (y > 0) triplets.emplace_back(k, k - m, -1.0);
+      if (y + 1 < m) triplets.emplace_back(k, k + m, -1.0);
+    }
+  }
+  SparseMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  A.makeCompressed();
+  return A;
+}
+
+Eigen::VectorXd random_vector(int n, unsigned seed, double low = -1.0, double high = 1.0) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uniform(low, high);
+  Eigen::VectorXd v(n);
+  for (int i = 0; i < n; ++i) v[i] = uniform(rng);
+  return v;
+}
+
+SparseMatrix random_spd(int m, unsigned seed) {
+  return grid_matrix(m, random_vector(m * m, seed, 0.5, 1.5));
+}
+
+// Symmetric, nonsingular, one negative eigenvalue: the shift sits halfway
+// between the two smallest Laplacian eigenvalues, 4 - 2cos(i pi/(m+1)) -
+// 2cos(j pi/(m+1)) for (i, j) = (1, 1) and (1, 2).
+SparseMatrix symmetric_indefinite(int m) {
+  const double h = M_PI / (m + 1);
+  const double lambda11 = 4.0 - 4.0 * std::cos(h);
+  const double lambda12 = 4.0 - 2.0 * std::cos(h) - 2.0 * std::cos(2.0 * h);
+  return grid_matrix(m, Eigen::VectorXd::Constant(m * m, -0.5 * (lambda11 + lambda12)));
+}
+
+// The matrix with row and column `k` zeroed but kept in the pattern.
+SparseMatrix with_zero_row_and_column(SparseMatrix A, int k) {
+  for (int j = 0; j < A.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(A, j); it; ++it) {
+      if (it.row() == k || it.col() == k) it.valueRef() = 0.0;
+    }
+  }
+  return A;
+}
+
+double relative_residual(const SparseMatrix& A, const Eigen::VectorXd& x,
+                         const Eigen::VectorXd& b) {
+  return (A * x - b).norm() / b.norm();
+}
+
+std::string expected_method(LinearSolverKind kind) {
+  switch (kind) {
+    case LinearSolverKind::kDenseLU:
+      return "dense-lu";
+    case LinearSolverKind::kDenseLDLT:
+      return "dense-ldlt";
+    case LinearSolverKind::kCholmod:
+      return "cholmod-supernodal-llt";
+    case LinearSolverKind::kUmfpack:
+      return "umfpack";
+    case LinearSolverKind::kAuto:
+      break;
+  }
+  return "";
+}
+
+// Every explicit kind on symmetric positive definite systems. Dense solvers get
+// a 24 x 24 grid (n = 576) to stay fast; sparse ones a 40 x 40 grid (n = 1600).
+class EverySolverTest : public testing::TestWithParam<LinearSolverKind> {
+ protected:
+  int grid() const {
+    const LinearSolverKind kind = GetParam();
+    return kind == LinearSolverKind::kDenseLU || kind == LinearSolverKind::kDenseLDLT ? 24 : 40;
+  }
+  std::unique_ptr<LinearSolver> make(const SparseMatrix& pattern) const {
+    LinearSolverChoice choice = make_linear_solver(GetParam(), pattern, /*symmetric=*/true);
+    EXPECT_EQ(choice.solver->method(), expected_method(GetParam()));
+    choice.solver->analyze(pattern);
+    return std::move(choice.solver);
+  }
+};
+
+TEST_P(EverySolverTest, SolvesRandomSpdSystem) {
+  const SparseMatrix A = random_spd(grid(), 1);
+  const Eigen::VectorXd b = random_vector(A.rows(), 2);
+  auto solver = make(A);
+  ASSERT_TRUE(solver->factorize(A));
+  Eigen::VectorXd x(A.rows());
+  solver->solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+  EXPECT_GT(solver->factor_nonzeros(), A.rows());
+  EXPECT_TRUE(solver->fallback_note().empty());
+  EXPECT_EQ(solver->method(), expected_method(GetParam()));
+}
+
+TEST_P(EverySolverTest, RefactorsNewValuesOnTheSamePatternWithoutReanalysis) {
+  const SparseMatrix A1 = random_spd(grid(), 3);
+  const SparseMatrix A2 = random_spd(grid(), 4);
+  ASSERT_FALSE(A1.isApprox(A2));
+  const Eigen::VectorXd b = random_vector(A1.rows(), 5);
+  auto solver = make(A1);
+  Eigen::VectorXd x1(A1.rows()), x2(A1.rows());
+  ASSERT_TRUE(solver->factorize(A1));
+  solver->solve(b, &x1);
+  ASSERT_TRUE(solver->factorize(A2));
+  solver->solve(b, &x2);
+  EXPECT_LT(relative_residual(A1, x1, b), kResidualTolerance);
+  EXPECT_LT(relative_residual(A2, x2, b), kResidualTolerance);
+  // Fails if the second solve still used the first factor.
+  EXPECT_GT(relative_residual(A1, x2, b), 1e-6);
+  EXPECT_EQ(solver->counters().analyses, 1);
+  EXPECT_EQ(solver->counters().factorizations, 2);
+  EXPECT_EQ(solver->counters().solves, 2);
+  EXPECT_GT(solver->counters().factorization_seconds, 0.0);
+}
+
+TEST_P(EverySolverTest, SingularMatrixFailsToFactorize) {
+  const SparseMatrix A = with_zero_row_and_column(random_spd(grid(), 6), 17);
+  auto solver = make(A);
+  EXPECT_FALSE(solver->factorize(A));
+  Eigen::VectorXd x(A.rows());
+  EXPECT_THROW(solver->solve(random_vector(A.rows(), 7), &x), std::logic_error);
+}
+
+// A graph Laplacian (no diagonal shift, Neumann rows summing to zero) is
+// singular, but rounding leaves a tiny pivot rather than an exact zero.
+TEST_P(EverySolverTest, RoundingHiddenSingularityFailsToFactorize) {
+  SparseMatrix A = random_spd(grid(), 8);
+  for (int j = 0; j < A.outerSize(); ++j) {
+    double off_diagonal_sum = 0.0;
+    for (SparseMatrix::InnerIterator it(A, j); it; ++it) {
+      if (it.row() != j) off_diagonal_sum += it.value();
+    }
+    A.coeffRef(j, j) = -off_diagonal_sum;
+  }
+  auto solver = make(A);
+  EXPECT_FALSE(solver->factorize(A));
+}
+
+TEST_P(EverySolverTest, NonFiniteValueFailsWithoutChangingMethodAndRecovers) {
+  const SparseMatrix A = random_spd(grid(), 9);
+  SparseMatrix poisoned = A;
+  poisoned.valuePtr()[poisoned.nonZeros() / 2] = std::numeric_limits<double>::quiet_NaN();
+  auto solver = make(A);
+  EXPECT_FALSE(solver->factorize(poisoned));
+  poisoned.valuePtr()[poisoned.nonZeros() / 2] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(solver->factorize(poisoned));
+  EXPECT_EQ(solver->method(), expected_method(GetParam())) << "NaN must not trigger a fallback";
+  EXPECT_TRUE(solver->fallback_note().empty());
+
+  ASSERT_TRUE(solver->factorize(A));
+  const Eigen::VectorXd b = random_vector(A.rows(), 10);
+  Eigen::VectorXd x(A.rows());
+  solver->solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+}
+
+TEST_P(EverySolverTest, SolveDoesNotAllocateInSteadyState) {
+#ifndef STIFFSIM_COUNT_ALLOCATIONS
+  GTEST_SKIP() << "allocation counting needs glibc";
+#else
+  const SparseMatrix A = random_spd(grid(), 11);
+  const Eigen::VectorXd b1 = random_vector(A.rows(), 12);
+  const Eigen::VectorXd b2 = random_vector(A.rows(), 13);
+  auto solver = make(A);
+  ASSERT_TRUE(solver->factorize(A));
+  Eigen::VectorXd x(A.rows());
+  solver->solve(b1, &x);  // the first solve may size workspaces
+  // The instrument itself must see an ordinary Eigen allocation.
+  allocation_count = 0;
+  counting_allocations = true;
+  const Eigen::VectorXd copy = b1;
+  counting_allocations = false;
+  ASSERT_GT(allocation_count.load(), 0);
+  ASSERT_EQ(copy, b1);
+  allocation_count = 0;
+  counting_allocations = true;
+  solver->solve(b2, &x);
+  solver->solve(b1, &x);
+  counting_allocations = false;
+  EXPECT_EQ(allocation_count.load(), 0);
+  EXPECT_LT(relative_residual(A, x, b1), kResidualTolerance);
+#endif
+}
+
+TEST_P(EverySolverTest, RejectsMatrixWithAnotherPatternOrSize) {
+  const SparseMatrix A = random_spd(grid(), 14);
+  auto solver = make(A);
+  const SparseMatrix smaller = random_spd(grid() - 1, 14);
+  EXPECT_THROW(solver->factorize(smaller), std::invalid_argument);
+}
+
+INSTANTIATE_TEST_SUITE_P(LinearSolvers, EverySolverTest,
+                         testing::Values(LinearSolverKind::kDenseLU, LinearSolverKind::kDenseLDLT,
+                                         LinearSolverKind::kCholmod, LinearSolverKind::kUmfpack),
+                         [](const testing::TestParamInfo<LinearSolverKind>& info) {
+                           std::string name = to_string(info.param);
+                           name.erase(std::remove(name.begin(), name.end(), '-'), name.end());
+                           return name;
+                         });
+
+// Solvers that accept unsymmetric matrices.
+class UnsymmetricSolverTest : public testing::TestWithParam<LinearSolverKind> {};
+
+TEST_P(UnsymmetricSolverTest, SolvesUnsymmetricSystem) {
+  const int m = GetParam() == LinearSolverKind::kDenseLU ? 24 : 40;
+  const SparseMatrix A = grid_matrix(m, random_vector(m * m, 20, 0.5, 1.5), /*convection=*/0.6);
+  ASSERT_FALSE(A.isApprox(SparseMatrix(A.transpose())));
+  const Eigen::VectorXd b = random_vector(A.rows(), 21);
+  LinearSolverChoice choice = make_linear_solver(GetParam(), A, /*symmetric=*/false);
+  choice.solver->analyze(A);
+  ASSERT_TRUE(choice.solver->factorize(A));
+  Eigen::VectorXd x(A.rows());
+  choice.solver->solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+  // Fails if only one triangle (or the symmetric part) had been used.
+  EXPECT_GT(relative_residual(SparseMatrix(A.transpose()), x, b), 1e-3);
+}
+
+INSTANTIATE_TEST_SUITE_P(LinearSolvers, UnsymmetricSolverTest,
+                         testing::Values(LinearSolverKind::kDenseLU, LinearSolverKind::kUmfpack),
+                         [](const testing::TestParamInfo<LinearSolverKind>& info) {
+                           std::string name = to_string(info.param);
+                           name.erase(std::remove(name.begin(), name.end(), '-'), name.end());
+                           return name;
+                         });
+
+TEST(CholmodSolverTest, IndefiniteMatrixFallsBackToLdltOnceAndStillSolves) {
+  const SparseMatrix A = symmetric_indefinite(30);
+  const Eigen::VectorXd b = random_vector(A.rows(), 30);
+  CholmodSolver solver;
+  solver.analyze(A);
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(solver.factorize(A));
+  const std::string first_log = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(solver.method(), "cholmod-ldlt");
+  EXPECT_NE(solver.fallback_note().find("not positive definite"), std::string::npos)
+      << solver.fallback_note();
+  EXPECT_NE(solver.fallback_note().find("at factorization 1:"), std::string::npos)
+      << solver.fallback_note();
+  EXPECT_NE(solver.fallback_note().find("switched from CHOLMOD supernodal LL^T to CHOLMOD LDL^T"),
+            std::string::npos)
+      << solver.fallback_note();
+  EXPECT_EQ(first_log, "stiffsim: " + solver.fallback_note() + "\n");
+
+  Eigen::VectorXd x(A.rows());
+  solver.solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+  EXPECT_GT(solver.factor_nonzeros(), A.rows());
+
+  // The switch is permanent and said once: a second indefinite matrix (and a
+  // definite one) are factored by LDL^T without a word.
+  const SparseMatrix spd = random_spd(30, 31);
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(solver.factorize(A));
+  ASSERT_TRUE(solver.factorize(spd));
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  EXPECT_EQ(solver.method(), "cholmod-ldlt");
+  solver.solve(b, &x);
+  EXPECT_LT(relative_residual(spd, x, b), kResidualTolerance);
+  // One analysis for the pattern, one redone for LDL^T.
+  EXPECT_EQ(solver.counters().analyses, 2);
+  EXPECT_EQ(solver.counters().factorizations, 3);
+}
+
+// [[0, L], [L, 0]] with L a shifted Laplacian: nonsingular, but every diagonal
+// entry is zero, so LDL^T without pivoting meets a zero pivot whatever the
+// ordering, and only UMFPACK's pivoting gets through.
+TEST(CholmodSolverTest, ZeroDiagonalFallsBackToUmfpack) {
+  const int m = 15;
+  const SparseMatrix L = random_spd(m, 40);
+  const int n = 2 * m * m;
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (int j = 0; j < L.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(L, j); it; ++it) {
+      triplets.emplace_back(it.row(), m * m + it.col(), it.value());
+      triplets.emplace_back(m * m + it.row(), it.col(), it.value());
+    }
+  }
+  for (int k = 0; k < n; ++k) triplets.emplace_back(k, k, 0.0);  // explicit zeros
+  SparseMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  A.makeCompressed();
+
+  CholmodSolver solver;
+  solver.analyze(A);
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(solver.factorize(A));
+  const std::string log = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(solver.method(), "umfpack");
+  EXPECT_NE(solver.fallback_note().find("to CHOLMOD LDL^T"), std::string::npos);
+  EXPECT_NE(solver.fallback_note().find("switched from CHOLMOD LDL^T to UMFPACK"),
+            std::string::npos)
+      << solver.fallback_note();
+  EXPECT_NE(log.find("stiffsim: "), std::string::npos);
+  const Eigen::VectorXd b = random_vector(n, 41);
+  Eigen::VectorXd x(n);
+  solver.solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+  EXPECT_GT(solver.factor_nonzeros(), n);
+}
+
+TEST(AutoChoiceTest, SmallSystemsGoDense) {
+  const SparseMatrix A = random_spd(14, 50);  // n = 196
+  LinearSolverChoice symmetric = make_linear_solver(LinearSolverKind::kAuto, A, true);
+  EXPECT_EQ(symmetric.solver->method(), "dense-ldlt");
+  EXPECT_NE(symmetric.reason.find("n = 196 <= 200"), std::string::npos) << symmetric.reason;
+  EXPECT_NE(symmetric.reason.find("dense LDLT"), std::string::npos) << symmetric.reason;
+  LinearSolverChoice unsymmetric = make_linear_solver(LinearSolverKind::kAuto, A, false);
+  EXPECT_EQ(unsymmetric.solver->method(), "dense-lu");
+  EXPECT_NE(unsymmetric.reason.find("unsymmetric"), std::string::npos) << unsymmetric.reason;
+}
+
+TEST(AutoChoiceTest, LargeSparseSystemsGoToCholmodOrUmfpack) {
+  // n = 1024; 5 n - 4 m = 4992 entries, density 4992 / 1024^2 = 0.476%.
+  const SparseMatrix A = random_spd(32, 51);
+  LinearSolverChoice symmetric = make_linear_solver(LinearSolverKind::kAuto, A, true);
+  EXPECT_EQ(symmetric.solver->method(), "cholmod-supernodal-llt");
+  EXPECT_NE(symmetric.reason.find("n = 1024 > 200"), std::string::npos) << symmetric.reason;
+  EXPECT_NE(symmetric.reason.find("density 0.476% <= 10%"), std::string::npos) << symmetric.reason;
+  EXPECT_NE(symmetric.reason.find("CHOLMOD"), std::string::npos) << symmetric.reason;
+  LinearSolverChoice unsymmetric = make_linear_solver(LinearSolverKind::kAuto, A, false);
+  EXPECT_EQ(unsymmetric.solver->method(), "umfpack");
+  EXPECT_NE(unsymmetric.reason.find("UMFPACK"), std::string::npos) << unsymmetric.reason;
+}
+
+TEST(AutoChoiceTest, DenseLargeSystemsGoDense) {
+  PatternBuilder builder(300, 300);
+  builder.add_block(0, 0, 100, 300);  // density 1/3
+  const SparseMatrix A = builder.build();
+  LinearSolverChoice choice = make_linear_solver(LinearSolverKind::kAuto, A, false);
+  EXPECT_EQ(choice.solver->method(), "dense-lu");
+  EXPECT_NE(choice.reason.find("density 33.3% > 10%"), std::string::npos) << choice.reason;
+}
+
+TEST(ExplicitChoiceTest, HonouredAndRejectedForUnsymmetricWhenTheyNeedSymmetry) {
+  const SparseMatrix A = random_spd(5, 52);  // small: auto would pick dense
+  EXPECT_EQ(make_linear_solver(LinearSolverKind::kUmfpack, A, true).solver->method(), "umfpack");
+  EXPECT_EQ(make_linear_solver(LinearSolverKind::kCholmod, A, true).solver->method(),
+            "cholmod-supernodal-llt");
+  EXPECT_THROW(make_linear_solver(LinearSolverKind::kCholmod, A, false), std::invalid_argument);
+  EXPECT_THROW(make_linear_solver(LinearSolverKind::kDenseLDLT, A, false), std::invalid_argument);
+  EXPECT_EQ(make_linear_solver(LinearSolverKind::kDenseLU, A, false).solver->method(), "dense-lu");
+}
+
+TEST(LinearSolverKindTest, ParsesEveryNameAndRoundTrips) {
+  EXPECT_EQ(parse_linear_solver_kind("dense"), LinearSolverKind::kDenseLU);
+  for (LinearSolverKind kind :
+       {LinearSolverKind::kAuto, LinearSolverKind::kDenseLU, LinearSolverKind::kDenseLDLT,
+        LinearSolverKind::kCholmod, LinearSolverKind::kUmfpack}) {
+    EXPECT_EQ(parse_linear_solver_kind(to_string(kind)), kind) << to_string(kind);
+  }
+  try {
+    parse_linear_solver_kind("superlu");
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("superlu"), std::string::npos) << message;
+    for (const char* name : {"auto", "dense-lu", "dense-ldlt", "cholmod", "umfpack"}) {
+      EXPECT_NE(message.find(name), std::string::npos) << message;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace stiffsim
