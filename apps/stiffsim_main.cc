@@ -74,21 +74,28 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                   "Scene file: YAML with cloth, rope and mesh components (DESIGN.md section 9). "
                   "Bare URDF files are not supported yet.")
       ->required();
+  run->add_option("--set", o->sets,
+                  "Override a scene value, PATH=VALUE with VALUE in YAML (repeatable): "
+                  "cloth.stretch.k=1e6, cloth.nodes=[64,64], simulation.accuracy=1e-5, "
+                  "gravity=[0,0,-1]")
+      // One value per --set, so that `--set a=1 scene.yaml` does not take the
+      // scene file for a second override.
+      ->allow_extra_args(false)
+      ->group("Scene");
 
   const std::string simulation = "Simulation (each overrides the scene's simulation block)";
-  o->integrator_option =
-      run->add_option("--integrator", o->integrator,
-                      "Integration method: " + join(integrator_names(), ", "))
-          ->check(CLI::IsMember(integrator_names()))
-          ->group(simulation);
+  o->integrator_option = run->add_option("--integrator", o->integrator,
+                                         "Integration method: " + join(integrator_names(), ", "))
+                             ->check(CLI::IsMember(integrator_names()))
+                             ->group(simulation);
   o->t_final_option = run->add_option("--t-final", o->t_final, "End time of the run, s")
                           ->check(number_check("POSITIVE", false, false))
                           ->group(simulation);
-  o->step_option =
-      run->add_option("--step", o->step, "Step size, s: the maximum (and initial) step, or the "
-                                         "step itself with --fixed-step")
-          ->check(number_check("POSITIVE", false, false))
-          ->group(simulation);
+  o->step_option = run->add_option("--step", o->step,
+                                   "Step size, s: the maximum (and initial) step, or the "
+                                   "step itself with --fixed-step")
+                       ->check(number_check("POSITIVE", false, false))
+                       ->group(simulation);
   o->fixed_step_option =
       run->add_flag("--fixed-step,!--no-fixed-step", o->fixed_step,
                     "Take fixed steps of --step (no error control), or force error control")
@@ -146,16 +153,7 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                   "Directory for ParaView frames: <scene>_NNNNN.vtk per sample and "
                   "<scene>.vtk.series")
       ->group(outputs);
-  run->add_option("--set", o->sets,
-                  "Override a scene value, PATH=VALUE with VALUE in YAML (repeatable): "
-                  "cloth.stretch.k=1e6, cloth.nodes=[64,64], simulation.accuracy=1e-5, "
-                  "gravity=[0,0,-1]")
-      // One value per --set, so that `--set a=1 scene.yaml` does not take the
-      // scene file for a second override.
-      ->allow_extra_args(false)
-      ->group("Scene");
-  run->add_flag("-q,--quiet", o->quiet, "No progress bar and no notices on stderr")
-      ->group(outputs);
+  run->add_flag("-q,--quiet", o->quiet, "No progress bar and no notices on stderr")->group(outputs);
   run->add_flag("--summary", o->summary,
                 "Print a short summary to stdout: DOFs, method, steps, Newton work, linear "
                 "solver, wall time, energy")
@@ -189,9 +187,10 @@ void apply_options(const RunOptions& o, SceneConfig* config) {
   if (o.full_newton) config->implicit.full_newton = true;
   if (o.no_reuse) config->implicit.reuse = false;
   if (config->integrator.min_step > config->integrator.max_step) {
-    throw InputError("--step " + std::to_string(config->integrator.max_step) +
-                     " is below the scene's simulation.min_step " +
-                     std::to_string(config->integrator.min_step));
+    char message[160];
+    std::snprintf(message, sizeof(message), "--step %g is below the scene's simulation.min_step %g",
+                  config->integrator.max_step, config->integrator.min_step);
+    throw InputError(message);
   }
 }
 
@@ -247,14 +246,18 @@ void print_summary(const RunSummary& s, const std::string& source) {
     std::printf("newton         %s form, %s Jacobian\n", r.newton_form.c_str(),
                 r.jacobian_scheme.c_str());
   }
-  std::printf("steps          %ld (largest %g, smallest %g), %ld shrinks from error control, "
-              "%ld from Newton failures\n",
-              st.steps_taken, st.largest_step_size_taken, st.smallest_adapted_step_size_taken,
+  std::printf("steps          %ld (largest %g", st.steps_taken, st.largest_step_size_taken);
+  // Fixed-step runs adapt nothing: the smallest adapted step is undefined.
+  if (std::isfinite(st.smallest_adapted_step_size_taken)) {
+    std::printf(", smallest adapted %g", st.smallest_adapted_step_size_taken);
+  }
+  std::printf("), %ld shrinks from error control, %ld from Newton failures\n",
               st.step_shrinkages_from_error_control, st.step_shrinkages_from_substep_failures);
-  std::printf("work           %ld Newton iterations, %ld factorizations, %ld Jacobian "
-              "evaluations, %ld derivative evaluations\n",
-              st.newton_raphson_iterations, st.iteration_matrix_factorizations,
-              st.jacobian_evaluations, st.derivative_evaluations);
+  std::printf(
+      "work           %ld Newton iterations, %ld factorizations, %ld Jacobian "
+      "evaluations, %ld derivative evaluations\n",
+      st.newton_raphson_iterations, st.iteration_matrix_factorizations, st.jacobian_evaluations,
+      st.derivative_evaluations);
   if (!r.linear_solver.empty()) {
     std::printf("linear solver  %s: %s%s%s\n", r.linear_solver.c_str(),
                 r.linear_solver_reason.c_str(), r.linear_solver_fallback.empty() ? "" : "; ",
@@ -262,10 +265,11 @@ void print_summary(const RunSummary& s, const std::string& source) {
     std::printf("nonzeros       iteration matrix %ld, factor %ld\n", st.iteration_matrix_nonzeros,
                 st.factor_nonzeros);
   }
-  std::printf("wall time      %.3f s (jacobian %.3f, assembly %.3f, factorization %.3f, "
-              "solve %.3f, derivatives %.3f)\n",
-              s.wall_seconds, st.jacobian_seconds, st.assembly_seconds, st.factorization_seconds,
-              st.solve_seconds, st.derivative_seconds);
+  std::printf(
+      "wall time      %.3f s (jacobian %.3f, assembly %.3f, factorization %.3f, "
+      "solve %.3f, derivatives %.3f)\n",
+      s.wall_seconds, st.jacobian_seconds, st.assembly_seconds, st.factorization_seconds,
+      st.solve_seconds, st.derivative_seconds);
   std::printf("energy         start %.10g J, end %.10g J\n", s.energy_start, s.energy_end);
   std::printf("samples        %ld up to t = %g%s\n", s.samples, s.t_reached,
               s.stopped_early ? " (stopped early)" : "");
@@ -320,11 +324,10 @@ int run_command(const RunOptions& options) {
     summary.stopped_early = result.stopped_early;
     if (result.stopped_early) summary.stop_reason = "stopped by the sample callback";
   } catch (const IntegrationError& e) {
+    // The integrator's message names the time, the step and the method
+    // (error.h), so it is passed on as is.
     exit_code = IntegrationError::kExitCode;
-    char where[96];
-    std::snprintf(where, sizeof(where), "integration failed at t = %.10g (step %.3g): ", e.time(),
-                  e.step());
-    failure = where + std::string(e.what());
+    failure = e.what();
   } catch (const InputError& e) {
     exit_code = InputError::kExitCode;
     failure = e.what();
@@ -372,15 +375,16 @@ int run_command(const RunOptions& options) {
   if (!failure.empty()) {
     std::fprintf(stderr, "stiffsim: error: %s\n", failure.c_str());
     if (trajectory && write_errors.empty()) {
-      std::fprintf(stderr, "stiffsim: %s keeps the %ld samples up to t = %g\n",
-                   trajectory->path().c_str(), trajectory->rows(), summary.t_reached);
+      std::fprintf(stderr, "stiffsim: kept %ld sample(s) up to t = %g in %s\n", trajectory->rows(),
+                   summary.t_reached, trajectory->path().c_str());
     }
   } else if (!options.quiet && !options.summary) {
     std::fprintf(stderr, "stiffsim: %s: %ld samples to t = %g in %.2f s (%ld steps)\n",
                  summary.scene.c_str(), summary.samples, summary.t_reached, summary.wall_seconds,
                  summary.statistics.steps_taken);
   }
-  for (const std::string& e : write_errors) std::fprintf(stderr, "stiffsim: error: %s\n", e.c_str());
+  for (const std::string& e : write_errors)
+    std::fprintf(stderr, "stiffsim: error: %s\n", e.c_str());
   if (exit_code == 0 && !write_errors.empty()) exit_code = 1;
   return exit_code;
 }

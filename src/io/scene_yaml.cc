@@ -42,8 +42,8 @@ std::vector<std::string> component_types() { return {"cloth", "rope", "mesh", "u
 
 std::vector<std::string> component_keys(const std::string& type) {
   if (type == "cloth") {
-    return {"name",  "type", "nodes", "size",   "total_mass", "stretch",
-            "shear", "bend", "pinned", "drag"};
+    return {"name",    "type",  "nodes", "size",   "total_mass",
+            "stretch", "shear", "bend",  "pinned", "drag"};
   }
   if (type == "rope") {
     return {"name", "type", "nodes", "length", "total_mass", "stretch", "bend", "pinned", "drag"};
@@ -54,9 +54,16 @@ std::vector<std::string> component_keys(const std::string& type) {
   if (type == "urdf") {
     // Known so that --set paths into a urdf component are accepted and the
     // user hears "not supported yet" rather than "unknown key".
-    return {"name",          "type",         "file",          "formulation",
-            "floating_base", "initial",      "joint_stiffness", "joint_rest",
-            "joint_damping", "bushing"};
+    return {"name",
+            "type",
+            "file",
+            "formulation",
+            "floating_base",
+            "initial",
+            "joint_stiffness",
+            "joint_rest",
+            "joint_damping",
+            "bushing"};
   }
   return {"name", "type"};
 }
@@ -68,10 +75,13 @@ bool is_spring_block(const std::string& key) {
 std::vector<std::string> spring_keys() { return {"k", "c"}; }
 
 std::vector<std::string> simulation_keys() {
-  return {"integrator", "t_final",     "step",          "fixed_step",
-          "error_estimate", "accuracy", "sample_period", "min_step",
-          "jacobian",   "linear_solver", "newton_form", "full_newton",
-          "reuse",      "definite_iteration_matrix"};
+  return {"integrator",     "t_final",
+          "step",           "fixed_step",
+          "error_estimate", "accuracy",
+          "sample_period",  "min_step",
+          "jacobian",       "linear_solver",
+          "newton_form",    "full_newton",
+          "reuse",          "definite_iteration_matrix"};
 }
 
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ") {
@@ -173,11 +183,11 @@ class Section {
           const std::vector<std::string>& allowed)
       : doc_(doc), map_(std::move(map)), context_(std::move(context)), prefix_(std::move(prefix)) {
     if (!map_.IsMap()) {
-      doc_.fail(map_, context_,
-                (prefix_.empty() ? std::string("expected a map")
-                                 : "'" + prefix_.substr(0, prefix_.size() - 1) +
-                                       "' must be a map") +
-                    " with keys " + join(allowed) + ", got " + node_kind(map_));
+      doc_.fail(
+          map_, context_,
+          (prefix_.empty() ? std::string("expected a map")
+                           : "'" + prefix_.substr(0, prefix_.size() - 1) + "' must be a map") +
+              " with keys " + join(allowed) + ", got " + node_kind(map_));
     }
     std::vector<std::string> seen;
     for (const auto& entry : map_) {
@@ -487,8 +497,8 @@ void read_simulation(const Section& top, SceneConfig* config) {
   config->integrator.min_step =
       s.number_or("min_step", Range::kNonNegative, config->integrator.min_step);
   if (config->integrator.min_step > config->integrator.max_step) {
-    s.fail(s.get("min_step"), "min_step must not exceed step (" +
-                                  std::to_string(config->integrator.max_step) + ")");
+    s.fail(s.get("min_step"),
+           "min_step must not exceed step (" + std::to_string(config->integrator.max_step) + ")");
   }
   ImplicitSettings& implicit = config->implicit;
   if (s.has("jacobian")) {
@@ -577,8 +587,8 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
       doc.fail(node, context,
                "the scene has more than " + std::to_string(kMaxTotalNodes) + " nodes in total");
     }
-    components.push_back(
-        with_location(c, [&] { return std::make_unique<ParticleSystem>(std::move(built.description)); }));
+    components.push_back(with_location(
+        c, [&] { return std::make_unique<ParticleSystem>(std::move(built.description)); }));
     config.surfaces.push_back(std::move(built.surface));
   }
   try {
@@ -625,8 +635,8 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
     first_key = 0;
   } else if (keys[0] == "simulation") {
     if (keys.size() != 2 || !contains(simulation_keys(), keys[1])) {
-      doc->fail_override(text, "unknown key '" + path + "' (simulation keys: " +
-                                   join(simulation_keys()) + ")");
+      doc->fail_override(
+          text, "unknown key '" + path + "' (simulation keys: " + join(simulation_keys()) + ")");
     }
     target.reset(root);
     first_key = 0;
@@ -649,12 +659,13 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
       }
     }
     if (!found) {
-      doc->fail_override(text, "unknown key '" + keys[0] + "': no component has that name (" +
-                                   (names.empty() ? "no components" : "components: " + join(names)) +
-                                   "; other keys: gravity, simulation.<key>)");
+      doc->fail_override(text,
+                         "unknown key '" + keys[0] + "': no component has that name (" +
+                             (names.empty() ? "no components" : "components: " + join(names)) +
+                             "; other keys: gravity, simulation.<key>)");
     }
-    if (keys.size() < 2) doc->fail_override(text, "name a key of the component, e.g. " + keys[0] +
-                                                      ".total_mass=0.5");
+    if (keys.size() < 2)
+      doc->fail_override(text, "name a key of the component, e.g. " + keys[0] + ".total_mass=0.5");
     const YAML::Node type = target["type"];
     const std::vector<std::string> allowed =
         component_keys(type.IsScalar() ? type.Scalar() : std::string());
@@ -668,8 +679,8 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
                                    "' has no key '" + keys[depth] + "')");
     }
     if (keys.size() == 3 && !contains(spring_keys(), keys[2])) {
-      doc->fail_override(text, "unknown key '" + path + "' (spring keys: " +
-                                   join(spring_keys()) + ")");
+      doc->fail_override(text,
+                         "unknown key '" + path + "' (spring keys: " + join(spring_keys()) + ")");
     }
   }
 
@@ -709,8 +720,9 @@ SceneConfig parse_scene(const std::string& text, const std::string& source_name,
                      join(top_level_keys()) + ")");
   }
   if (!root.IsMap()) {
-    doc.fail(root, "", "the scene must be a map with keys " + join(top_level_keys()) + ", got " +
-                           node_kind(root));
+    doc.fail(
+        root, "",
+        "the scene must be a map with keys " + join(top_level_keys()) + ", got " + node_kind(root));
   }
   const std::filesystem::path source_path(source_name);
   std::string scene_name = source_path.stem().string();

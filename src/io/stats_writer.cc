@@ -134,8 +134,8 @@ void StatsWriter::write(const RunSummary& summary) {
   std::error_code error;
   std::filesystem::rename(temp_path_, path_, error);
   if (error) {
-    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" +
-                             error.message() + ")");
+    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" + error.message() +
+                             ")");
   }
   pending_ = false;
 }

@@ -102,8 +102,8 @@ void TrajectoryWriter::close_and_rename() {
   std::filesystem::rename(temp_path_, path_, error);
   if (error) {
     std::remove(temp_path_.c_str());
-    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" +
-                             error.message() + ")");
+    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" + error.message() +
+                             ")");
   }
 }
 

@@ -88,8 +88,7 @@ VtkWriter::VtkWriter(std::string directory, const Scene& scene,
     if (component < static_cast<int>(surfaces.size()) && !surfaces[component].empty()) {
       triangles = &surfaces[component];
       for (const auto& t : *triangles) {
-        if (t[0] < 0 || t[1] < 0 || t[2] < 0 || t[0] >= nodes || t[1] >= nodes ||
-            t[2] >= nodes) {
+        if (t[0] < 0 || t[1] < 0 || t[2] < 0 || t[0] >= nodes || t[1] >= nodes || t[2] >= nodes) {
           triangles = nullptr;  // not this component's numbering: draw springs instead
           break;
         }
@@ -121,8 +120,8 @@ VtkWriter::VtkWriter(std::string directory, const Scene& scene,
                  std::to_string(4 * polygon_count) + "\n" + polygons;
   }
   if (line_count > 0) {
-    topology_ += "LINES " + std::to_string(line_count) + " " + std::to_string(3 * line_count) +
-                 "\n" + lines;
+    topology_ +=
+        "LINES " + std::to_string(line_count) + " " + std::to_string(3 * line_count) + "\n" + lines;
   }
 }
 
@@ -191,9 +190,10 @@ void VtkWriter::write_series(const std::string& reason) {
   out += "  \"files\": [";
   for (size_t i = 0; i < times_.size(); ++i) {
     out += i == 0 ? "\n" : ",\n";
-    out += "    {\"name\": " +
-           json_string(std::filesystem::path(frame_path(static_cast<long>(i))).filename().string()) +
-           ", \"time\": ";
+    out +=
+        "    {\"name\": " +
+        json_string(std::filesystem::path(frame_path(static_cast<long>(i))).filename().string()) +
+        ", \"time\": ";
     append_number(times_[i], &out);
     out += "}";
   }

@@ -19,17 +19,17 @@ struct RunSummary {
   Dimensions dofs;
   IntegratorReport report;
   IntegratorStatistics statistics;
-  double accuracy = kNaN;       // target accuracy of the run
-  double step = kNaN;           // maximum (or fixed) step
+  double accuracy = kNaN;  // target accuracy of the run
+  double step = kNaN;      // maximum (or fixed) step
   double sample_period = kNaN;
-  double wall_seconds = 0.0;    // the whole simulation loop, writers included
-  double energy_start = kNaN;   // NaN where the scene defines no energy
-  double energy_end = kNaN;     // at the last sample
+  double wall_seconds = 0.0;   // the whole simulation loop, writers included
+  double energy_start = kNaN;  // NaN where the scene defines no energy
+  double energy_end = kNaN;    // at the last sample
   long samples = 0;
-  double t_final = kNaN;        // requested end time
-  double t_reached = kNaN;      // time of the last sample
+  double t_final = kNaN;    // requested end time
+  double t_reached = kNaN;  // time of the last sample
   bool stopped_early = false;
-  std::string stop_reason;      // empty unless stopped_early
+  std::string stop_reason;  // empty unless stopped_early
 };
 
 // The JSON document, pretty-printed.

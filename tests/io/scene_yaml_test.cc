@@ -1,0 +1,424 @@
+#include "stiffsim/io/scene_yaml.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "stiffsim/error.h"
+#include "stiffsim/model/particles.h"
+
+namespace stiffsim {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string model_path(const std::string& name) {
+  return std::string(STIFFSIM_SOURCE_DIR) + "/models/" + name;
+}
+
+const ParticleSystem& particles(const SceneConfig& config, int component = 0) {
+  const auto* p = dynamic_cast<const ParticleSystem*>(&config.scene->component(component));
+  EXPECT_NE(p, nullptr);
+  return *p;
+}
+
+double max_spring_k(const ParticleSystem& p) {
+  double k = 0.0;
+  for (const Spring& s : p.description().springs) k = std::max(k, s.k);
+  return k;
+}
+
+// The message of the InputError that loading `text` throws ("" and a test
+// failure if it loads).
+std::string load_error(const std::string& text, const std::vector<std::string>& overrides = {},
+                       const std::string& source = "bad.yaml") {
+  try {
+    parse_scene(text, source, overrides);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected an InputError for:\n" << text;
+  return "";
+}
+
+// A small valid cloth; tests change one line of it to make it invalid.
+const char* kCloth = R"(components:
+  - name: cloth
+    type: cloth
+    nodes: [4, 3]
+    size: [1.0, 0.5]
+    total_mass: 0.4
+    stretch: {k: 1.0e3, c: 0.5}
+    bend: {k: 10.0}
+simulation:
+  t_final: 0.5
+  step: 0.01
+  accuracy: 1.0e-4
+  sample_period: 0.02
+)";
+
+std::string replace(std::string text, const std::string& from, const std::string& to) {
+  const size_t at = text.find(from);
+  EXPECT_NE(at, std::string::npos) << from;
+  return text.replace(at, from.size(), to);
+}
+
+// A directory of its own per test, removed afterwards.
+class TempDir {
+ public:
+  TempDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() /
+            ("stiffsim_scene_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~TempDir() { fs::remove_all(path_); }
+  std::string write(const std::string& name, const std::string& text) const {
+    const fs::path file = path_ / name;
+    fs::create_directories(file.parent_path());
+    std::ofstream(file) << text;
+    return file.string();
+  }
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+TEST(SceneYaml, ShippedClothIsTheDefaultScene) {
+  const SceneConfig config = load_scene(model_path("cloth.yaml"));
+  EXPECT_EQ(config.scene->name(), "cloth");
+  // 32 x 32 nodes, the two far corners pinned: 1022 free nodes.
+  EXPECT_EQ(config.scene->dimensions(), (Dimensions{3066, 3066, 0}));
+  EXPECT_EQ(config.integrator_name, "vie");
+  EXPECT_FALSE(config.integrator.fixed_step);
+  EXPECT_DOUBLE_EQ(config.integrator.max_step, 1.0 / 60.0);
+  EXPECT_DOUBLE_EQ(config.simulation.sample_period, 1.0 / 60.0);
+  EXPECT_DOUBLE_EQ(config.simulation.t_final, 2.0);
+  EXPECT_DOUBLE_EQ(config.integrator.accuracy, 1e-3);
+  const ParticleSystem& cloth = particles(config);
+  EXPECT_EQ(cloth.description().pinned, (std::vector<int>{32 * 31, 32 * 32 - 1}));
+  EXPECT_DOUBLE_EQ(cloth.description().masses[0], 0.4 / 1024);
+  EXPECT_EQ(cloth.description().gravity, Eigen::Vector3d(0, 0, -9.81));
+  ASSERT_EQ(config.surfaces.size(), 1u);
+  EXPECT_EQ(config.surfaces[0].size(), 2u * 31 * 31);
+}
+
+TEST(SceneYaml, ShippedStiffClothIsFixedStepWithStiffStretch) {
+  const SceneConfig config = load_scene(model_path("cloth_stiff.yaml"));
+  EXPECT_EQ(config.scene->dimensions().nq, 3066);
+  EXPECT_TRUE(config.integrator.fixed_step);
+  EXPECT_DOUBLE_EQ(config.integrator.max_step, 1.0 / 60.0);
+  EXPECT_DOUBLE_EQ(max_spring_k(particles(config)), 1e6);
+}
+
+TEST(SceneYaml, ShippedRopeIsPinnedAtNodeZero) {
+  const SceneConfig config = load_scene(model_path("rope.yaml"));
+  EXPECT_EQ(config.scene->dimensions().nq, 3 * 49);
+  const ParticleSystem& rope = particles(config);
+  EXPECT_EQ(rope.description().pinned, std::vector<int>{0});
+  EXPECT_DOUBLE_EQ(max_spring_k(rope), 1e5);
+  EXPECT_TRUE(config.surfaces[0].empty());  // drawn as springs
+}
+
+TEST(SceneYaml, ShippedSheetLoadsItsMeshRelativeToTheSceneFile) {
+  // Loaded from another working directory on purpose: the mesh path is
+  // relative to the scene file, not to the process.
+  const SceneConfig config = load_scene(model_path("sheet.yaml"));
+  const ParticleSystem& sheet = particles(config);
+  EXPECT_EQ(sheet.node_count(), 64);
+  EXPECT_EQ(sheet.description().pinned, (std::vector<int>{0, 7}));
+  EXPECT_EQ(config.scene->dimensions().nq, 3 * 62);
+  EXPECT_EQ(config.surfaces[0].size(), 2u * 7 * 7);
+}
+
+TEST(SceneYaml, ReadsEveryValueOfTheFile) {
+  const SceneConfig config = parse_scene(kCloth, "dir/small.yaml");
+  EXPECT_EQ(config.scene->name(), "small");
+  EXPECT_EQ(config.source, "dir/small.yaml");
+  EXPECT_EQ(config.scene->dimensions().nq, 3 * 10);
+  EXPECT_DOUBLE_EQ(config.simulation.t_final, 0.5);
+  EXPECT_DOUBLE_EQ(config.integrator.max_step, 0.01);
+  EXPECT_DOUBLE_EQ(config.integrator.accuracy, 1e-4);
+  EXPECT_DOUBLE_EQ(config.simulation.sample_period, 0.02);
+  const ParticleSystem& cloth = particles(config);
+  // Stretch (4x3 grid: 3*3 + 4*2 = 17) and bend (2*3 + 4*1 = 10) springs, no
+  // shear: the block is absent.
+  EXPECT_EQ(cloth.description().springs.size(), 27u);
+  EXPECT_NEAR(cloth.description().positions[5].y(), 0.25, 1e-15);
+}
+
+TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
+  const SceneConfig config = parse_scene(replace(kCloth, "simulation:\n", R"(simulation:
+  fixed_step: true
+  error_estimate: true
+  jacobian: central
+  linear_solver: umfpack
+  newton_form: generic
+  full_newton: true
+  reuse: false
+  definite_iteration_matrix: false
+)"),
+                                         "s.yaml");
+  EXPECT_TRUE(config.integrator.fixed_step);
+  EXPECT_TRUE(config.integrator.error_estimate);
+  EXPECT_EQ(config.implicit.jacobian, JacobianScheme::kCentral);
+  EXPECT_EQ(config.implicit.linear_solver, LinearSolverKind::kUmfpack);
+  EXPECT_EQ(config.implicit.newton_form, NewtonForm::kGeneric);
+  EXPECT_TRUE(config.implicit.full_newton);
+  EXPECT_FALSE(config.implicit.reuse);
+  EXPECT_FALSE(config.implicit.definite_iteration_matrix);
+}
+
+TEST(SceneYaml, OverridesReplaceScalarsListsAndBlocks) {
+  const SceneConfig config = parse_scene(
+      kCloth, "s.yaml",
+      {"cloth.nodes=[5,6]", "cloth.stretch.k=1e6", "simulation.accuracy=1e-5", "gravity=[0,0,-1]",
+       "cloth.pinned=[0]", "cloth.shear.k=7", "simulation.fixed_step=true"});
+  EXPECT_EQ(config.scene->dimensions().nq, 3 * (30 - 1));
+  const ParticleSystem& cloth = particles(config);
+  EXPECT_DOUBLE_EQ(max_spring_k(cloth), 1e6);
+  EXPECT_EQ(cloth.description().gravity, Eigen::Vector3d(0, 0, -1));
+  EXPECT_DOUBLE_EQ(config.integrator.accuracy, 1e-5);
+  EXPECT_TRUE(config.integrator.fixed_step);
+  // The shear block did not exist: the override created it (c defaults to 0).
+  const auto& springs = cloth.description().springs;
+  EXPECT_TRUE(std::any_of(springs.begin(), springs.end(),
+                          [](const Spring& s) { return s.k == 7.0 && s.c == 0.0; }));
+}
+
+TEST(SceneYaml, NullOverrideRemovesAnOptionalBlock) {
+  const size_t with_bend = particles(parse_scene(kCloth, "s.yaml")).description().springs.size();
+  const size_t without =
+      particles(parse_scene(kCloth, "s.yaml", {"cloth.bend=null"})).description().springs.size();
+  EXPECT_EQ(with_bend - without, 10u);
+}
+
+TEST(SceneYaml, LaterOverrideWins) {
+  const SceneConfig config =
+      parse_scene(kCloth, "s.yaml", {"cloth.nodes=[9,9]", "cloth.nodes=[3,3]"});
+  EXPECT_EQ(config.scene->dimensions().nq, 3 * 7);
+}
+
+TEST(SceneYaml, OverrideErrorsNameTheSetAndTheKey) {
+  std::string e = load_error(kCloth, {"cloth.strech.k=1"});
+  EXPECT_NE(e.find("--set cloth.strech.k=1"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown key 'cloth.strech.k'"), std::string::npos) << e;
+  e = load_error(kCloth, {"clth.nodes=[2,2]"});
+  EXPECT_NE(e.find("no component has that name"), std::string::npos) << e;
+  e = load_error(kCloth, {"simulation.acuracy=1"});
+  EXPECT_NE(e.find("unknown key 'simulation.acuracy'"), std::string::npos) << e;
+  e = load_error(kCloth, {"cloth.stretch.kk=1"});
+  EXPECT_NE(e.find("unknown key 'cloth.stretch.kk'"), std::string::npos) << e;
+  e = load_error(kCloth, {"cloth.nodes"});
+  EXPECT_NE(e.find("expected PATH=VALUE"), std::string::npos) << e;
+  e = load_error(kCloth, {"cloth.nodes=[3,"});
+  EXPECT_NE(e.find("not valid YAML"), std::string::npos) << e;
+  // A value that parses but is out of range is checked like the file's own,
+  // and the message points at the --set, not at a line of the file.
+  e = load_error(kCloth, {"cloth.total_mass=-2"});
+  EXPECT_NE(e.find("bad.yaml: --set cloth.total_mass=-2: components[0] (cloth): total_mass must be "
+                   "positive"),
+            std::string::npos)
+      << e;
+  e = load_error(kCloth, {"cloth.nodes=[0,3]"});
+  EXPECT_NE(e.find("--set cloth.nodes=[0,3]"), std::string::npos) << e;
+  EXPECT_NE(e.find("nodes[0] must be at least 2"), std::string::npos) << e;
+}
+
+TEST(SceneYaml, MalformedYamlNamesFileAndLine) {
+  const std::string e = load_error("components:\n  - name: cloth\n    nodes: [4, 4\n    type: x\n");
+  EXPECT_EQ(e.rfind("bad.yaml:4:", 0), 0u) << e;
+  EXPECT_NE(e.find("malformed YAML"), std::string::npos) << e;
+}
+
+TEST(SceneYaml, UnknownKeyNamesTheKeyPathAndLine) {
+  std::string e = load_error(replace(kCloth, "stretch: {k", "strech: {k"));
+  EXPECT_EQ(e.rfind("bad.yaml:7:5: components[0] (cloth): unknown key 'strech' (expected one of: "
+                    "name, type, nodes",
+                    0),
+            0u)
+      << e;
+  e = load_error(replace(kCloth, "{k: 1.0e3, c: 0.5}", "{k: 1.0e3, cc: 0.5}"));
+  EXPECT_NE(e.find("unknown key 'stretch.cc' (expected one of: k, c)"), std::string::npos) << e;
+  e = load_error(replace(kCloth, "  accuracy:", "  acuracy:"));
+  EXPECT_NE(e.find("simulation: unknown key 'acuracy'"), std::string::npos) << e;
+  e = load_error(std::string("gravty: [0, 0, -1]\n") + kCloth);
+  EXPECT_NE(e.find("bad.yaml:1:1: unknown key 'gravty'"), std::string::npos) << e;
+  e = load_error(replace(kCloth, "    bend:", "    total_mass: 1\n    bend:"));
+  EXPECT_NE(e.find("duplicate key 'total_mass'"), std::string::npos) << e;
+}
+
+TEST(SceneYaml, MissingMeshFileIsNamed) {
+  TempDir dir;
+  const std::string scene = dir.write("scenes/sheet.yaml", R"(components:
+  - name: sheet
+    type: mesh
+    file: meshes/nope.obj
+    density: 0.2
+)");
+  try {
+    load_scene(scene);
+    FAIL() << "loaded a scene whose mesh does not exist";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(
+        m.find("sheet.yaml:4:11: components[0] (sheet): mesh file 'meshes/nope.obj' not found"),
+        std::string::npos)
+        << m;
+    // Where it looked: next to the scene file.
+    EXPECT_NE(m.find((dir.path() / "scenes/meshes/nope.obj").string()), std::string::npos) << m;
+  }
+}
+
+TEST(SceneYaml, MeshPathIsRelativeToTheSceneFile) {
+  TempDir dir;
+  dir.write("scenes/meshes/tri.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n");
+  const std::string scene = dir.write("scenes/quad.yaml", R"(components:
+  - name: quad
+    type: mesh
+    file: meshes/tri.obj
+    density: 2.0
+    stretch: {k: 100}
+    pinned: [0]
+)");
+  const SceneConfig config = load_scene(scene);
+  EXPECT_EQ(particles(config).node_count(), 4);
+  EXPECT_EQ(config.scene->dimensions().nq, 9);
+  EXPECT_EQ(config.surfaces[0].size(), 2u);  // the quad, fan-triangulated
+}
+
+TEST(SceneYaml, MalformedMeshErrorsNameSceneAndMesh) {
+  TempDir dir;
+  dir.write("broken.obj", "v 0 0 0\nv 1 0 0\nf 1 2 9\n");
+  const std::string scene = dir.write("s.yaml", R"(components:
+  - {name: m, type: mesh, file: broken.obj, density: 1}
+)");
+  try {
+    load_scene(scene);
+    FAIL() << "loaded a mesh with a face index out of range";
+  } catch (const InputError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("s.yaml:2:"), std::string::npos) << m;
+    EXPECT_NE(m.find("broken.obj:3"), std::string::npos) << m;
+  }
+}
+
+TEST(SceneYaml, OutOfRangeNumbersAreRejected) {
+  struct Case {
+    std::string from, to, fragment;
+  };
+  const std::vector<Case> cases = {
+      {"total_mass: 0.4", "total_mass: -0.4", "total_mass must be positive, got -0.4"},
+      {"total_mass: 0.4", "total_mass: 0", "total_mass must be positive, got 0"},
+      {"nodes: [4, 3]", "nodes: [0, 3]", "nodes[0] must be at least 2, got 0"},
+      {"nodes: [4, 3]", "nodes: [4, 2.5]", "nodes[1] must be an integer, got 2.5"},
+      {"nodes: [4, 3]", "nodes: [4]", "nodes must be a list [nx, ny]"},
+      {"nodes: [4, 3]", "nodes: [100000, 100000]", "exceeds the limit"},
+      {"nodes: [4, 3]", "nodes: [four, 3]", "nodes[0] must be a number, got 'four'"},
+      {"size: [1.0, 0.5]", "size: [1.0, .inf]", "size[1] must be a finite number, got '.inf'"},
+      {"size: [1.0, 0.5]", "size: [.nan, 0.5]", "size[0] must be a finite number, got '.nan'"},
+      {"size: [1.0, 0.5]", "size: [1.0, 1e999]", "size[1] must be a finite number"},
+      {"{k: 1.0e3, c: 0.5}", "{k: -1, c: 0.5}", "stretch.k must be >= 0, got -1"},
+      {"{k: 1.0e3, c: 0.5}", "{k: 1, c: -0.5}", "stretch.c must be >= 0, got -0.5"},
+      {"{k: 1.0e3, c: 0.5}", "{c: 0.5}", "missing required key 'stretch.k'"},
+      {"total_mass: 0.4", "total_mass: 0.4\n    pinned: [12]", "pinned[0] must be at most 11"},
+      {"total_mass: 0.4", "total_mass: 0.4\n    pinned: [1, 1]", "pinned lists node 1 twice"},
+      {"total_mass: 0.4", "total_mass: 0.4\n    drag: -1", "drag must be >= 0"},
+      {"    total_mass: 0.4\n", "", "missing required key 'total_mass'"},
+      {"t_final: 0.5", "t_final: 0", "simulation: t_final must be positive"},
+      {"step: 0.01", "step: -0.01", "simulation: step must be positive"},
+      {"accuracy: 1.0e-4", "accuracy: 0", "accuracy must be in (0, 1]"},
+      {"accuracy: 1.0e-4", "accuracy: 1.5", "accuracy must be in (0, 1]"},
+      {"sample_period: 0.02", "sample_period: -1", "sample_period must be >= 0"},
+      {"t_final: 0.5", "t_final: 0.5\n  fixed_step: maybe", "fixed_step must be true or false"},
+      {"t_final: 0.5", "t_final: 0.5\n  integrator: rk99", "integrator must be one of"},
+      {"t_final: 0.5", "t_final: 0.5\n  jacobian: exact", "jacobian must be one of analytic"},
+      {"t_final: 0.5", "t_final: 0.5\n  min_step: 1", "min_step must not exceed step"},
+  };
+  for (const Case& c : cases) {
+    const std::string e = load_error(replace(kCloth, c.from, c.to));
+    EXPECT_NE(e.find(c.fragment), std::string::npos) << "case " << c.to << ": " << e;
+    EXPECT_EQ(e.rfind("bad.yaml", 0), 0u) << e;
+  }
+}
+
+TEST(SceneYaml, GravityMustBeThreeFiniteNumbers) {
+  EXPECT_NE(load_error(std::string("gravity: [0, 0]\n") + kCloth).find("gravity must be a list"),
+            std::string::npos);
+  EXPECT_NE(load_error(std::string("gravity: [0, .nan, 0]\n") + kCloth)
+                .find("gravity[1] must be a finite number"),
+            std::string::npos);
+}
+
+TEST(SceneYaml, ComponentNamesAreUniqueAndUsable) {
+  const std::string two = R"(components:
+  - {name: a, type: rope, nodes: 3, length: 1, total_mass: 1}
+  - {name: a, type: rope, nodes: 3, length: 1, total_mass: 1}
+)";
+  std::string e = load_error(two);
+  EXPECT_NE(e.find("bad.yaml:3:12: components[1] (a): duplicate component name 'a'"),
+            std::string::npos)
+      << e;
+  e = load_error(replace(kCloth, "name: cloth", "name: my/cloth"));
+  EXPECT_NE(e.find("name must be non-empty"), std::string::npos) << e;
+  e = load_error(replace(kCloth, "name: cloth", "name: ''"));
+  EXPECT_NE(e.find("name must be non-empty"), std::string::npos) << e;
+  e = load_error(replace(kCloth, "name: cloth", "name: simulation"));
+  EXPECT_NE(e.find("is reserved"), std::string::npos) << e;
+  e = load_error(replace(kCloth, "  - name: cloth\n", "  - \n"));
+  EXPECT_NE(e.find("components[0]: missing required key 'name'"), std::string::npos) << e;
+}
+
+TEST(SceneYaml, ComponentTypesAreChecked) {
+  std::string e = load_error(replace(kCloth, "type: cloth", "type: blanket"));
+  EXPECT_NE(e.find("components[0] (cloth): unknown type 'blanket' (expected one of: cloth, rope, "
+                   "mesh, urdf)"),
+            std::string::npos)
+      << e;
+  e = load_error("components:\n  - {name: arm, type: urdf, file: chain_10.urdf}\n");
+  EXPECT_NE(e.find("bad.yaml:2:23: components[0] (arm): type 'urdf' is not supported yet"),
+            std::string::npos)
+      << e;
+  // Keys of another type are unknown keys of this one.
+  e = load_error(replace(kCloth, "size: [1.0, 0.5]", "length: 1.0"));
+  EXPECT_NE(e.find("unknown key 'length'"), std::string::npos) << e;
+}
+
+TEST(SceneYaml, DocumentShapeErrors) {
+  EXPECT_NE(load_error("").find("bad.yaml: empty scene"), std::string::npos);
+  EXPECT_NE(load_error("- 1\n- 2\n").find("the scene must be a map"), std::string::npos);
+  EXPECT_NE(load_error("components: []\n").find("components must be a non-empty list"),
+            std::string::npos);
+  EXPECT_NE(load_error("gravity: [0, 0, -1]\n").find("missing required key 'components'"),
+            std::string::npos);
+  EXPECT_NE(load_error("components:\n  - 3\n").find("components[0]: expected a map"),
+            std::string::npos);
+}
+
+TEST(SceneYaml, FileLevelErrors) {
+  try {
+    load_scene("/nonexistent/scene.yaml");
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_STREQ(e.what(), "/nonexistent/scene.yaml: cannot open");
+  }
+  try {
+    load_scene(model_path("chain_10.urdf"));
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("chain_10.urdf: URDF scenes are not supported yet"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace stiffsim
