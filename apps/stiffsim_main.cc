@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "stiffsim/error.h"
+#include "stiffsim/linalg/blas_threads.h"
 #include "stiffsim/integrators/integrator_factory.h"
 #include "stiffsim/integrators/simulator.h"
 #include "stiffsim/io/scene_yaml.h"
@@ -61,6 +62,7 @@ struct RunOptions {
   std::string output, stats, vtk;
   std::vector<std::string> sets;
   bool quiet = false, summary = false;
+  int blas_threads = 1;
   // Options that override the scene only when given.
   CLI::Option *integrator_option = nullptr, *t_final_option = nullptr, *step_option = nullptr,
               *accuracy_option = nullptr, *sample_period_option = nullptr,
@@ -158,6 +160,11 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                 "Print a short summary to stdout: DOFs, method, steps, Newton work, linear "
                 "solver, wall time, energy")
       ->group(outputs);
+
+  run->add_option("--blas-threads", o->blas_threads,
+                  "Threads of the OpenBLAS under CHOLMOD (default 1: on few cores its spinning "
+                  "workers cost more than they gain)")
+      ->check(CLI::Range(1, 256));
 
   run->footer(
       "Exit codes: 0 done; 2 bad input (scene, options); 3 integration failed (the CSV keeps "
@@ -416,6 +423,7 @@ int main(int argc, char** argv) {
     return kUsageExitCode;
   }
 
+  set_blas_threads(options.blas_threads);
   try {
     return run_command(options);
   } catch (const InputError& e) {

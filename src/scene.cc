@@ -39,6 +39,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
   if (components_.empty()) throw InputError(name_ + ": a scene needs at least one component");
   caps_.identity_velocity_map = caps_.constant_mass_matrix = caps_.diagonal_mass_matrix = true;
   caps_.symmetric_jacobians = caps_.analytic_jacobians = caps_.has_energy = true;
+  caps_.passive = true;
   for (const auto& c : components_) {
     offsets_.push_back(dims_);
     const Dimensions d = c->dimensions();
@@ -52,6 +53,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
     caps_.symmetric_jacobians &= k.symmetric_jacobians;
     caps_.analytic_jacobians &= k.analytic_jacobians;
     caps_.has_energy &= k.has_energy;
+    caps_.passive &= k.passive;
     caps_.has_quaternions |= k.has_quaternions;
   }
 

@@ -25,6 +25,9 @@ struct Capabilities {
   bool analytic_jacobians = false;      // force_jacobians() implemented
   bool has_quaternions = false;         // q holds unit quaternions: project after each step
   bool has_energy = false;              // energy() defined
+  // Every force is conservative (in energy()) or dissipative, so the true
+  // motion never gains energy.
+  bool passive = false;
 };
 
 // Force Jacobians, each with a pattern that is fixed for the lifetime of the

@@ -73,19 +73,14 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
     zero = std::abs(dx[i]) <= std::max(std::abs(x[i]), 1.0) * kZeroTol;
   }
   if (zero) return Convergence::kConverged;
-  // Hairer & Wanner IV.8: at the first iteration the rate of the previous
-  // solve stands in for theta (eta_0 = max(eta_old, uround)^0.8), so a
-  // well-predicted step can stop after one iteration; afterwards
-  // theta = |dx_k| / |dx_{k-1}|.
-  double eta;
-  if (iteration == 0) {
-    eta = std::pow(std::max(last_eta_, 1e-16), 0.8);
-  } else {
-    const double theta = dx_norm / last_dx_norm;
-    if (theta >= 1.0) return Convergence::kDiverged;
-    eta = theta / (1.0 - theta);
-    last_eta_ = eta;
-  }
+  // Hairer & Wanner IV.8: theta = |dx_k| / |dx_{k-1}|, eta = theta / (1 - theta).
+  // The first iteration has no rate. Hairer's stand-in (the previous solve's
+  // eta) assumes a good predictor; ours starts from x_n, so the first update
+  // is the whole step and a stale small eta would accept it unchecked.
+  if (iteration == 0) return Convergence::kNotYet;
+  const double theta = dx_norm / last_dx_norm;
+  if (theta >= 1.0) return Convergence::kDiverged;
+  const double eta = theta / (1.0 - theta);
   if (eta * dx_norm <= newton_tolerance()) return Convergence::kConverged;
   return Convergence::kNotYet;
 }

@@ -1,6 +1,7 @@
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 
 #include <chrono>
+#include <cmath>
 
 #include "stiffsim/error.h"
 
@@ -84,7 +85,23 @@ void VelocityImplicitEuler::do_initialize() {
   invalidate_factorization();
   factored_h_ = 0.0;
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &guess_, &dx_}) v->resize(d.nx());
-  for (Eigen::VectorXd* v : {&r_, &dy_}) v->resize(d.ny());
+  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(d.ny());
+  x_trial_.resize(d.nx());
+  energy_state_.x = Eigen::VectorXd::Zero(d.nx());
+  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive;
+  // G is a valid merit where the residual is its gradient: the mass-matrix
+  // form of a passive scene with energy, analytic Jacobians, N = I, a
+  // constant diagonal M and no z states.
+  use_potential_merit_ = implicit_.newton_form == NewtonForm::kMassMatrix && caps_.has_energy &&
+                         caps_.passive && caps_.analytic_jacobians &&
+                         caps_.identity_velocity_map && caps_.diagonal_mass_matrix &&
+                         caps_.constant_mass_matrix && d.nz == 0;
+  if (use_potential_merit_) {
+    merit_jacobians_ = system_.jacobian_pattern();
+    dv_.resize(d.nv);
+    Dv_.resize(d.nv);
+    g_scale_ = 0.0;
+  }
   qdot_.resize(d.nq);
   q_prev_.resize(d.nq);
   F_.resize(d.nv);
@@ -211,52 +228,174 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
       x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
 }
 
+void VelocityImplicitEuler::advance_positions(double h, const Eigen::VectorXd& x0,
+                                              Eigen::VectorXd* x) {
+  // q_{k+1} = q_n + h N(q_k) v_{k+1}: N lagged one iterate.
+  const Dimensions& d = dims_;
+  if (caps_.identity_velocity_map) {
+    x->segment(0, d.nq) = x0.segment(0, d.nq) + h * x->segment(d.nq, d.nv);
+  } else {
+    system_.map_velocity_to_qdot(x->segment(0, d.nq), x->segment(d.nq, d.nv), qdot_);
+    ++stats_.velocity_map_evaluations;
+    x->segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
+  }
+}
+
+double VelocityImplicitEuler::merit(const Eigen::VectorXd& r) const {
+  // The residual measured in velocity units (the mass-matrix form's v rows
+  // are momenta), so that light and heavy nodes weigh alike.
+  if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
+    const double* m = mass_diagonal_;
+    double sum = 0.0;
+    for (int i = 0; i < dims_.nv; ++i) sum += (r[i] / m[i]) * (r[i] / m[i]);
+    return sum + r.tail(dims_.nz).squaredNorm();
+  }
+  return r.squaredNorm();
+}
+
+double VelocityImplicitEuler::incremental_potential(double t, const Eigen::VectorXd& x0,
+                                                   const Eigen::VectorXd& x, double h) {
+  // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v.
+  // Damping forces are D(q) v, linear in v; with D frozen at the current
+  // iterate (freezing it for a whole step lets the slope error
+  // h (D(q) - D_k) v . dy stall the search near the solution) they derive
+  // from the last term, so the residual at the iterate is exactly the
+  // gradient of G_k and the Armijo slope r . dy is exact.
+  const Dimensions& d = dims_;
+  energy_state_.t = t;
+  energy_state_.x.segment(0, d.nq) = x.segment(0, d.nq);
+  energy_state_.x.segment(d.nq, d.nv).setZero();
+  const double potential = system_.energy(energy_state_);
+  const auto v = x.segment(d.nq, d.nv);
+  dv_ = v - x0.segment(d.nq, d.nv);
+  const double* m = mass_diagonal_;
+  double inertia = 0.0;
+  for (int i = 0; i < d.nv; ++i) inertia += 0.5 * m[i] * dv_[i] * dv_[i];
+  Dv_.noalias() = merit_jacobians_.dF_dv * v;
+  return inertia + potential - 0.5 * h * v.dot(Dv_);
+}
+
 bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x0,
                                    const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x) {
   const Dimensions& d = dims_;
   const double tf = t0 + h;
+  ++stats_.newton_trials;
   *x = guess;
-  if (!implicit_.full_newton) {
+  advance_positions(h, x0, x);
+  // The last rung before shrinking h is a full Newton iteration: a step that
+  // starts where the linearization is degenerate (a flat membrane at rest has
+  // no transverse stiffness) converges once the Jacobian follows the iterate.
+  const bool full_newton = implicit_.full_newton || trial == kFullNewtonTrial;
+  if (!full_newton) {
     if (!refresh_matrices(t0, x0, h, trial)) return false;
     if (!iteration_matrix_factored()) return false;
   }
+  residual(tf, h, x0, *x, &r_);
+  if (use_potential_merit_) g_scale_ = std::abs(system_.energy(state_));
+  mass_diagonal_ = caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, d.nq)).valuePtr()
+                                              : nullptr;
+  double r_merit = merit(r_);
   q_prev_ = x->segment(0, d.nq);
   double last_norm = std::numeric_limits<double>::infinity();
   for (int i = 0; i < implicit_.max_newton_iterations; ++i) {
-    if (implicit_.full_newton) {
-      // Linearize at the current iterate itself (no position prediction).
+    if (full_newton) {
+      // Linearize at the current iterate itself (positions already advanced).
       compute_jacobian(tf, *x, 0.0);
       if (!form_and_factor(h)) return false;
     }
     ++stats_.newton_raphson_iterations;
-    residual(tf, h, x0, *x, &r_);
     r_ = -r_;
     solve_iteration_matrix(r_, &dy_);
-    x->segment(d.nq, d.ny()) += dy_;
-    // Positions with N lagged one iterate: q_{k+1} = q_n + h N(q_k) v_{k+1}.
-    if (caps_.identity_velocity_map) {
-      x->segment(0, d.nq) = x0.segment(0, d.nq) + h * x->segment(d.nq, d.nv);
-    } else {
-      system_.map_velocity_to_qdot(x->segment(0, d.nq), x->segment(d.nq, d.nv), qdot_);
-      ++stats_.velocity_map_evaluations;
-      x->segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
+    // Line search. Where the scene has an incremental potential G (see
+    // incremental_potential()), W's Newton direction descends G whatever
+    // approximations W holds, so the search heads for a minimizer of G: it
+    // never climbs to a saddle of G, a spurious root of the step equations
+    // where buckled stiff springs gain energy. Otherwise the residual norm
+    // is the merit. The full step is taken whenever it qualifies; the trial
+    // residual is then the next iteration's, at no extra cost.
+    double g_current = 0.0, slope = 0.0;
+    if (use_potential_merit_) {
+      evaluate_damping(tf, *x);
+      g_current = incremental_potential(tf, x0, *x, h);
+      slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G_k
     }
+    const bool potential_search = use_potential_merit_ && slope < 0.0;
+    double alpha = 1.0;
+    for (int backtrack = 0;; ++backtrack) {
+      x_trial_ = *x;
+      x_trial_.segment(d.nq, d.ny()) += alpha * dy_;
+      advance_positions(h, x0, &x_trial_);
+      residual(tf, h, x0, x_trial_, &r_trial_);
+      const double trial_merit = merit(r_trial_);
+      bool accept = std::isfinite(trial_merit);
+      if (accept && potential_search) {
+        const double g_trial = incremental_potential(tf, x0, x_trial_, h);
+        // Near the solution G changes by less than its own round-off; there
+        // a G that did not measurably rise and a smaller residual decide.
+        const double roundoff = 1e-11 * (std::abs(g_current) + g_scale_);
+        accept = g_trial <= g_current + 1e-4 * alpha * slope ||
+                 (g_trial <= g_current + roundoff && trial_merit < r_merit);
+      } else if (accept) {
+        accept = trial_merit <= (1.0 - 1e-4 * alpha) * r_merit;
+      }
+      if (accept) {
+        r_merit = trial_merit;
+        break;
+      }
+      if (backtrack == kMaxBacktracks) return false;
+      alpha *= 0.5;
+      ++stats_.line_search_backtracks;
+    }
+    x->swap(x_trial_);
+    r_.swap(r_trial_);
     dx_.segment(0, d.nq) = x->segment(0, d.nq) - q_prev_;
-    dx_.segment(d.nq, d.ny()) = dy_;
+    dx_.segment(d.nq, d.ny()) = alpha * dy_;
     q_prev_ = x->segment(0, d.nq);
     const double norm = state_change_norm(dx_);
+    if (alpha < 1.0) {
+      // A damped step says nothing about the rate of the undamped iteration.
+      last_norm = std::numeric_limits<double>::infinity();
+      continue;
+    }
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
-    if (c == Convergence::kConverged) return true;
+    if (c == Convergence::kConverged) return passes_energy_guard(x0, *x);
     if (c == Convergence::kDiverged) return false;
     last_norm = norm;
   }
   return false;
 }
 
+void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x) {
+  const auto start = std::chrono::steady_clock::now();
+  const Dimensions& d = dims_;
+  system_.force_jacobians(t, x.segment(0, d.nq), x.segment(d.nq, d.nv),
+                          x.segment(d.nq + d.nv, d.nz), JacobianRequest{}, &merit_jacobians_);
+  ++stats_.merit_damping_evaluations;
+  stats_.jacobian_seconds += seconds_since(start);
+}
+
+bool VelocityImplicitEuler::passes_energy_guard(const Eigen::VectorXd& x0,
+                                                const Eigen::VectorXd& x) {
+  // For a scene whose forces are conservative or dissipative, an implicit
+  // Euler step that gains energy has found a spurious root of the step
+  // equations (a buckled or inverted configuration of stiff springs reached
+  // at a large h): the attempt counts as a failure and the step shrinks.
+  if (!guard_energy_) return true;
+  energy_state_.x = x0;
+  const double before = system_.energy(energy_state_);
+  energy_state_.x = x;
+  const double after = system_.energy(energy_state_);
+  // Round-off of the energy sums and the Newton tolerance's share.
+  const double allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
+  if (after <= before + allowance) return true;
+  ++stats_.energy_guard_rejections;
+  return false;
+}
+
 bool VelocityImplicitEuler::solve_step(double t0, double h, const Eigen::VectorXd& x0,
                                        const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
   ++stats_.newton_solves;
-  for (int trial = 1; trial <= 4; ++trial) {
+  for (int trial = 1; trial <= kFullNewtonTrial; ++trial) {
     if (newton(t0, h, x0, guess, trial, x)) {
       if (caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));
       return true;

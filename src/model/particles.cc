@@ -183,6 +183,7 @@ Capabilities ParticleSystem::capabilities() const {
   c.symmetric_jacobians = true;
   c.analytic_jacobians = true;
   c.has_energy = true;
+  c.passive = true;  // springs and gravity conserve, dampers and drag dissipate
   return c;
 }
 

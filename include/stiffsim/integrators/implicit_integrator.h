@@ -35,6 +35,9 @@ struct ImplicitSettings {
   // Iteration matrices may use the definite spring approximation
   // (JacobianRequest::definite) so CHOLMOD's LL^T keeps working.
   bool definite_iteration_matrix = true;
+  // In passive scenes (Capabilities::passive) a Newton solution whose energy
+  // exceeds the step's initial energy is rejected as a spurious root.
+  bool energy_guard = true;
 };
 
 class ImplicitIntegrator : public IntegratorBase {
@@ -73,9 +76,6 @@ class ImplicitIntegrator : public IntegratorBase {
  private:
   LinearSolverChoice solver_;
   bool factored_ = false;
-  // Hairer's eta of the last Newton iteration that measured a rate; stands in
-  // for the unknown rate at the first iteration of the next solve.
-  double last_eta_ = 1.0;
 };
 
 }  // namespace stiffsim

@@ -51,6 +51,30 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   void residual(double t, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                 Eigen::VectorXd* r);
 
+  // Trials 1-3 are the reuse ladder; trial 4 iterates with a fresh Jacobian
+  // at every iterate before the step is given up.
+  static constexpr int kFullNewtonTrial = 4;
+  // Halvings of a Newton step before the iteration counts as diverged.
+  static constexpr int kMaxBacktracks = 8;
+
+  void advance_positions(double h, const Eigen::VectorXd& x0, Eigen::VectorXd* x);
+  // Squared residual norm the line search decreases.
+  double merit(const Eigen::VectorXd& r) const;
+  const double* mass_diagonal_ = nullptr;
+  // False when a converged step gained energy in a passive scene.
+  bool passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x);
+  bool guard_energy_ = false;
+  State energy_state_;
+  // The line search's incremental potential G_k and the damping matrix at
+  // the current iterate that enters it.
+  double incremental_potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                               double h);
+  void evaluate_damping(double t, const Eigen::VectorXd& x);
+  bool use_potential_merit_ = false;
+  double g_scale_ = 0.0;  // energy magnitude, for the round-off of G
+  ForceJacobians merit_jacobians_;
+  Eigen::VectorXd dv_, Dv_;
+
   // Workspaces, sized once in do_initialize().
   SparseMatrix iteration_matrix_;
   std::vector<int> slots_M_, slots_D_, slots_K_, slots_Fz_, slots_Zq_, slots_Zv_, slots_Zz_;
@@ -59,6 +83,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   SparseMatrix N_;       // N(q_k) when N != I
   SparseMatrix KN_, ZqN_;
   Eigen::VectorXd x_big_, x_half_, x_small_, guess_;
+  Eigen::VectorXd x_trial_, r_trial_;
   Eigen::VectorXd r_, dy_, dx_, qdot_, F_, zdot_, q_prev_;
   Eigen::VectorXd inverse_mass_diagonal_;  // generic form with diagonal M
 };
