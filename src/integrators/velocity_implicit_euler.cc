@@ -297,7 +297,13 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
   double r_merit = merit(r_);
   q_prev_ = x->segment(0, d.nq);
   double last_norm = std::numeric_limits<double>::infinity();
-  for (int i = 0; i < implicit_.max_newton_iterations; ++i) {
+  // The last rung converges (at least linearly with the definite clamp) but
+  // may need more iterations than a fresh modified Newton; giving it three
+  // times the budget is cheaper than halving the step.
+  const int max_iterations =
+      trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
+                                : implicit_.max_newton_iterations;
+  for (int i = 0; i < max_iterations; ++i) {
     if (full_newton) {
       // Linearize at the current iterate itself (positions already advanced).
       compute_jacobian(tf, *x, 0.0);
