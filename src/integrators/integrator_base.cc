@@ -232,7 +232,7 @@ void IntegratorBase::integrate_to(double t_final) {
   while (state_.t < t_final) step_at_most(t_final);
 }
 
-const SparseMatrix& IntegratorBase::mass_matrix_at(const Eigen::VectorXd& q) {
+const SparseMatrix& IntegratorBase::mass_matrix_at(const ConstVectorRef& q) {
   if (caps_.constant_mass_matrix && mass_matrix_valid_) return mass_matrix_;
   const auto start = Clock::now();
   system_.mass_matrix(q, &mass_matrix_);

@@ -96,9 +96,9 @@ void VelocityImplicitEuler::do_initialize() {
                          caps_.passive && caps_.analytic_jacobians &&
                          caps_.identity_velocity_map && caps_.diagonal_mass_matrix &&
                          caps_.constant_mass_matrix && d.nz == 0;
+  dv_.resize(d.nv);
   if (use_potential_merit_) {
     merit_jacobians_ = system_.jacobian_pattern();
-    dv_.resize(d.nv);
     Dv_.resize(d.nv);
     g_scale_ = 0.0;
   }
@@ -217,8 +217,12 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
   const auto v = x.segment(d.nq, d.nv);
   const auto v0 = x0.segment(d.nq, d.nv);
   const SparseMatrix& M = mass_matrix_at(guess_.segment(0, d.nq));
-  if (implicit_.newton_form == NewtonForm::kMassMatrix) {
-    r->segment(0, d.nv).noalias() = M * (v - v0);
+  if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
+    const double* m = M.valuePtr();
+    for (int i = 0; i < d.nv; ++i) (*r)[i] = m[i] * (v[i] - v0[i]) - h * F_[i];
+  } else if (implicit_.newton_form == NewtonForm::kMassMatrix) {
+    dv_ = v - v0;  // a named workspace: the sparse product would allocate a temporary
+    r->segment(0, d.nv).noalias() = M * dv_;
     r->segment(0, d.nv) -= h * F_;
   } else {
     const double* m = M.valuePtr();

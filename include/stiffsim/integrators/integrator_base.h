@@ -87,7 +87,7 @@ class IntegratorBase {
   void evaluate_forces(double t, const Eigen::VectorXd& x, Eigen::VectorXd* F,
                        Eigen::VectorXd* zdot);
   // Assembles M(q) into mass_matrix_ unless M is constant and already there.
-  const SparseMatrix& mass_matrix_at(const Eigen::VectorXd& q);
+  const SparseMatrix& mass_matrix_at(const ConstVectorRef& q);
 
   const System& system_;
   const IntegratorSettings settings_;

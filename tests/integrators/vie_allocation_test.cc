@@ -1,0 +1,65 @@
+// The per-step hot path of VIE allocates nothing once its workspaces are
+// sized: checked by counting malloc calls while a cloth is stepped.
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdlib>
+
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/model/particle_meshes.h"
+#include "stiffsim/model/particles.h"
+
+#if defined(__GLIBC__)
+extern "C" void* __libc_malloc(size_t size);
+static std::atomic<bool> g_counting{false};
+static std::atomic<long> g_allocations{0};
+extern "C" void* malloc(size_t size) {
+  if (g_counting.load(std::memory_order_relaxed)) ++g_allocations;
+  return __libc_malloc(size);
+}
+
+namespace stiffsim {
+namespace {
+
+long allocations_while_stepping(bool error_estimate) {
+  ClothSpec spec;
+  spec.nx = spec.ny = 6;  // 102 DOFs: the dense LDLT path, which allocates nothing either
+  spec.total_mass = 0.4;
+  spec.stretch = SpringParameters{1e3, 0.5};
+  spec.shear = SpringParameters{1e2, 0.1};
+  spec.bend = SpringParameters{10.0, 0.05};
+  const ParticleSystem cloth(make_cloth(spec));
+  IntegratorSettings settings;
+  settings.fixed_step = true;
+  settings.max_step = 1.0 / 240;
+  settings.error_estimate = error_estimate;
+  VelocityImplicitEuler vie(cloth, settings, ImplicitSettings{});
+  vie.initialize(cloth.initial_state());
+  vie.integrate_to(0.25);  // warm-up: every workspace sized, solver analyzed
+  g_allocations = 0;
+  g_counting = true;
+  vie.integrate_to(0.5);
+  g_counting = false;
+  EXPECT_GT(vie.statistics().newton_raphson_iterations, 0);
+  return g_allocations.load();
+}
+
+TEST(VieAllocation, FixedStepAllocatesNothing) { EXPECT_EQ(allocations_while_stepping(false), 0); }
+
+TEST(VieAllocation, StepWithErrorEstimateAllocatesNothing) {
+  EXPECT_EQ(allocations_while_stepping(true), 0);
+}
+
+TEST(VieAllocation, CounterSeesAllocations) {
+  g_allocations = 0;
+  g_counting = true;
+  void* p = std::malloc(64);
+  g_counting = false;
+  std::free(p);
+  EXPECT_EQ(g_allocations.load(), 1);
+}
+
+}  // namespace
+}  // namespace stiffsim
+#endif
