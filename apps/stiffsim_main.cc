@@ -15,13 +15,13 @@
 #include <vector>
 
 #include "stiffsim/error.h"
-#include "stiffsim/linalg/blas_threads.h"
 #include "stiffsim/integrators/integrator_factory.h"
 #include "stiffsim/integrators/simulator.h"
 #include "stiffsim/io/scene_yaml.h"
 #include "stiffsim/io/stats_writer.h"
 #include "stiffsim/io/trajectory_writer.h"
 #include "stiffsim/io/vtk_writer.h"
+#include "stiffsim/linalg/blas_threads.h"
 
 namespace stiffsim {
 namespace {

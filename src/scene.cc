@@ -62,7 +62,9 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
   mass_pattern_ = block_diagonal(
       comps, offsets_, dims_.nv, dims_.nv,
       [](const System& s) -> const SparseMatrix& { return s.mass_matrix_pattern(); },
-      [](const Dimensions& o) { return P{o.nv, o.nv}; });
+      [](const Dimensions& o) {
+        return P{o.nv, o.nv};
+      });
   if (!caps_.identity_velocity_map) {
     PatternBuilder b(dims_.nq, dims_.nv);
     for (size_t i = 0; i < comps.size(); ++i) add_velocity_map_block(*comps[i], offsets_[i], &b);
@@ -75,12 +77,24 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
         [m](const System& s) -> const SparseMatrix& { return s.jacobian_pattern().*m; }, at);
   };
   const Dimensions& D = dims_;
-  jacobian_pattern_.dF_dq = jac(&ForceJacobians::dF_dq, D.nv, D.nq, [](auto& o) { return P{o.nv, o.nq}; });
-  jacobian_pattern_.dF_dv = jac(&ForceJacobians::dF_dv, D.nv, D.nv, [](auto& o) { return P{o.nv, o.nv}; });
-  jacobian_pattern_.dF_dz = jac(&ForceJacobians::dF_dz, D.nv, D.nz, [](auto& o) { return P{o.nv, o.nz}; });
-  jacobian_pattern_.dfz_dq = jac(&ForceJacobians::dfz_dq, D.nz, D.nq, [](auto& o) { return P{o.nz, o.nq}; });
-  jacobian_pattern_.dfz_dv = jac(&ForceJacobians::dfz_dv, D.nz, D.nv, [](auto& o) { return P{o.nz, o.nv}; });
-  jacobian_pattern_.dfz_dz = jac(&ForceJacobians::dfz_dz, D.nz, D.nz, [](auto& o) { return P{o.nz, o.nz}; });
+  jacobian_pattern_.dF_dq = jac(&ForceJacobians::dF_dq, D.nv, D.nq, [](auto& o) {
+    return P{o.nv, o.nq};
+  });
+  jacobian_pattern_.dF_dv = jac(&ForceJacobians::dF_dv, D.nv, D.nv, [](auto& o) {
+    return P{o.nv, o.nv};
+  });
+  jacobian_pattern_.dF_dz = jac(&ForceJacobians::dF_dz, D.nv, D.nz, [](auto& o) {
+    return P{o.nv, o.nz};
+  });
+  jacobian_pattern_.dfz_dq = jac(&ForceJacobians::dfz_dq, D.nz, D.nq, [](auto& o) {
+    return P{o.nz, o.nq};
+  });
+  jacobian_pattern_.dfz_dv = jac(&ForceJacobians::dfz_dv, D.nz, D.nv, [](auto& o) {
+    return P{o.nz, o.nv};
+  });
+  jacobian_pattern_.dfz_dz = jac(&ForceJacobians::dfz_dz, D.nz, D.nz, [](auto& o) {
+    return P{o.nz, o.nz};
+  });
 
   for (size_t i = 0; i < comps.size(); ++i) {
     const System& c = *comps[i];
@@ -196,8 +210,8 @@ void Scene::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions d = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                           z.segment(o.nz, d.nz), F.segment(o.nv, d.nv));
+    components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), z.segment(o.nz, d.nz),
+                           F.segment(o.nv, d.nv));
   }
 }
 

@@ -32,8 +32,8 @@ class Scene : public System {
 
   const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
   void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
-  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-              const ConstVectorRef& z, VectorRef F) const override;
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
+              VectorRef F) const override;
   void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, VectorRef zdot) const override;
   const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }

@@ -18,13 +18,13 @@ using VectorRef = Eigen::Ref<Eigen::VectorXd>;
 using ConstVectorRef = Eigen::Ref<const Eigen::VectorXd>;
 
 struct Capabilities {
-  bool identity_velocity_map = false;   // N(q) = I (then nq == nv): no N products at all
-  bool constant_mass_matrix = false;    // M assembled once per run
-  bool diagonal_mass_matrix = false;    // M diagonal: M^-1 is a division
-  bool symmetric_jacobians = false;     // dF/dq and dF/dv symmetric (conservative particles)
-  bool analytic_jacobians = false;      // force_jacobians() implemented
-  bool has_quaternions = false;         // q holds unit quaternions: project after each step
-  bool has_energy = false;              // energy() defined
+  bool identity_velocity_map = false;  // N(q) = I (then nq == nv): no N products at all
+  bool constant_mass_matrix = false;   // M assembled once per run
+  bool diagonal_mass_matrix = false;   // M diagonal: M^-1 is a division
+  bool symmetric_jacobians = false;    // dF/dq and dF/dv symmetric (conservative particles)
+  bool analytic_jacobians = false;     // force_jacobians() implemented
+  bool has_quaternions = false;        // q holds unit quaternions: project after each step
+  bool has_energy = false;             // energy() defined
   // Every force is conservative (in energy()) or dissipative, so the true
   // motion never gains energy.
   bool passive = false;

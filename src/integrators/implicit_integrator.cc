@@ -25,10 +25,14 @@ JacobianScheme parse_jacobian_scheme(const std::string& name) {
 
 std::string to_string(JacobianScheme scheme) {
   switch (scheme) {
-    case JacobianScheme::kAnalytic: return "analytic";
-    case JacobianScheme::kForward: return "forward";
-    case JacobianScheme::kCentral: return "central";
-    case JacobianScheme::kAutomatic: return "automatic";
+    case JacobianScheme::kAnalytic:
+      return "analytic";
+    case JacobianScheme::kForward:
+      return "forward";
+    case JacobianScheme::kCentral:
+      return "central";
+    case JacobianScheme::kAutomatic:
+      return "automatic";
   }
   return "?";
 }

@@ -125,8 +125,8 @@ void IntegratorBase::fail_at_minimum(double h, const std::string& why) const {
       << " s (minimum " << working_min_step() << " s); largest state entries of the last attempt:";
   for (int k = 0; k < shown; ++k) {
     const int i = order[k];
-    msg << (k ? ", " : " ") << (i < static_cast<int>(names.size()) ? names[i] : "x")
-        << " = " << x[i];
+    msg << (k ? ", " : " ") << (i < static_cast<int>(names.size()) ? names[i] : "x") << " = "
+        << x[i];
   }
   throw IntegrationError(msg.str(), state_.t, h);
 }
@@ -151,10 +151,10 @@ void IntegratorBase::step_at_most(double t_limit) {
   }
 
   // Error-controlled step (reference/drake_integrators.md section 3.2).
-  double h = std::isnan(ideal_next_step_)
-                 ? (std::isfinite(settings_.initial_step) ? settings_.initial_step
-                                                          : settings_.max_step)
-                 : ideal_next_step_;
+  double h =
+      std::isnan(ideal_next_step_)
+          ? (std::isfinite(settings_.initial_step) ? settings_.initial_step : settings_.max_step)
+          : ideal_next_step_;
   for (;;) {
     bool limited = false;
     if (h_max < 0.95 * h) {
@@ -171,8 +171,9 @@ void IntegratorBase::step_at_most(double t_limit) {
       ++stats_.step_shrinkages_from_substep_failures;
       if (a < working_min_step()) {
         if (settings_.throw_on_minimum_step) {
-          fail_at_minimum(a, "Newton iteration failed to converge (or the state became "
-                             "non-finite)");
+          fail_at_minimum(a,
+                          "Newton iteration failed to converge (or the state became "
+                          "non-finite)");
         }
         fail_at_minimum(a, "no step could be taken");
       }
@@ -279,9 +280,8 @@ void IntegratorBase::evaluate_state_derivative(double t, const Eigen::VectorXd& 
     }
     if (!mass_solver_factored_) {
       if (!mass_solver_->factorize(M)) {
-        throw IntegrationError(method_name() + ": mass matrix is singular at t = " +
-                                   std::to_string(t),
-                               t, 0.0);
+        throw IntegrationError(
+            method_name() + ": mass matrix is singular at t = " + std::to_string(t), t, 0.0);
       }
       mass_solver_factored_ = true;
     }

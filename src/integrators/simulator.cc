@@ -36,7 +36,8 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
     if (period > 0.0) {
       // A sample within round-off of the step end is taken at the step end.
       const double snap = 1e-9 * period;
-      while (next_sample * period + initial.t <= t + snap && sample_time(next_sample) < t_final - snap) {
+      while (next_sample * period + initial.t <= t + snap &&
+             sample_time(next_sample) < t_final - snap) {
         const double ts = sample_time(next_sample);
         if (std::abs(ts - t) <= snap) {
           sample = integrator.state().x;

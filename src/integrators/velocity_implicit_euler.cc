@@ -93,9 +93,8 @@ void VelocityImplicitEuler::do_initialize() {
   // form of a passive scene with energy, analytic Jacobians, N = I, a
   // constant diagonal M and no z states.
   use_potential_merit_ = implicit_.newton_form == NewtonForm::kMassMatrix && caps_.has_energy &&
-                         caps_.passive && caps_.analytic_jacobians &&
-                         caps_.identity_velocity_map && caps_.diagonal_mass_matrix &&
-                         caps_.constant_mass_matrix && d.nz == 0;
+                         caps_.passive && caps_.analytic_jacobians && caps_.identity_velocity_map &&
+                         caps_.diagonal_mass_matrix && caps_.constant_mass_matrix && d.nz == 0;
   dv_.resize(d.nv);
   if (use_potential_merit_) {
     merit_jacobians_ = system_.jacobian_pattern();
@@ -228,8 +227,7 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
     const double* m = M.valuePtr();
     for (int i = 0; i < d.nv; ++i) (*r)[i] = v[i] - v0[i] - h * F_[i] / m[i];
   }
-  r->segment(d.nv, d.nz) =
-      x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
+  r->segment(d.nv, d.nz) = x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
 }
 
 void VelocityImplicitEuler::advance_positions(double h, const Eigen::VectorXd& x0,
@@ -258,7 +256,7 @@ double VelocityImplicitEuler::merit(const Eigen::VectorXd& r) const {
 }
 
 double VelocityImplicitEuler::incremental_potential(double t, const Eigen::VectorXd& x0,
-                                                   const Eigen::VectorXd& x, double h) {
+                                                    const Eigen::VectorXd& x, double h) {
   // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v.
   // Damping forces are D(q) v, linear in v; with D frozen at the current
   // iterate (freezing it for a whole step lets the slope error
@@ -296,17 +294,16 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
   }
   residual(tf, h, x0, *x, &r_);
   if (use_potential_merit_) g_scale_ = std::abs(system_.energy(state_));
-  mass_diagonal_ = caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, d.nq)).valuePtr()
-                                              : nullptr;
+  mass_diagonal_ =
+      caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, d.nq)).valuePtr() : nullptr;
   double r_merit = merit(r_);
   q_prev_ = x->segment(0, d.nq);
   double last_norm = std::numeric_limits<double>::infinity();
   // The last rung converges (at least linearly with the definite clamp) but
   // may need more iterations than a fresh modified Newton; giving it three
   // times the budget is cheaper than halving the step.
-  const int max_iterations =
-      trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
-                                : implicit_.max_newton_iterations;
+  const int max_iterations = trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
+                                                       : implicit_.max_newton_iterations;
   for (int i = 0; i < max_iterations; ++i) {
     if (full_newton) {
       // Linearize at the current iterate itself (positions already advanced).

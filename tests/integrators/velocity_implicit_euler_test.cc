@@ -49,7 +49,9 @@ IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-1
   return s;
 }
 
-std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch, std::optional<SpringParameters> bend = SpringParameters{10.0, 0.05}) {
+std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch,
+                                      std::optional<SpringParameters> bend = SpringParameters{
+                                          10.0, 0.05}) {
   ClothSpec spec;
   spec.nx = spec.ny = n;
   spec.total_mass = 0.4;
@@ -164,8 +166,7 @@ TEST(VelocityImplicitEuler, ReusesFactorizationsOnAClothRun) {
   EXPECT_EQ(st.linear_solves, st.newton_raphson_iterations);
   EXPECT_GE(st.newton_solves, 3 * st.steps_taken);
   EXPECT_LE(st.error_estimator_newton_raphson_iterations, st.newton_raphson_iterations);
-  EXPECT_LE(st.error_estimator_iteration_matrix_factorizations,
-            st.iteration_matrix_factorizations);
+  EXPECT_LE(st.error_estimator_iteration_matrix_factorizations, st.iteration_matrix_factorizations);
   EXPECT_LE(st.jacobian_evaluations, st.iteration_matrix_factorizations);
   EXPECT_LE(st.smallest_adapted_step_size_taken, st.largest_step_size_taken);
 }

@@ -42,8 +42,7 @@ struct ImplicitSettings {
 
 class ImplicitIntegrator : public IntegratorBase {
  public:
-  ImplicitIntegrator(const System& system, IntegratorSettings settings,
-                     ImplicitSettings implicit);
+  ImplicitIntegrator(const System& system, IntegratorSettings settings, ImplicitSettings implicit);
   IntegratorReport report() const override;
   const ImplicitSettings& implicit_settings() const { return implicit_; }
 

@@ -18,15 +18,15 @@ namespace stiffsim {
 
 struct IntegratorSettings {
   static constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-  double max_step = 0.01;        // error-controlled: largest step; fixed: the step
-  double initial_step = kNaN;    // NaN: max_step
-  double min_step = 0.0;         // requested minimum (the working minimum is never below 1e-14 |t|)
+  double max_step = 0.01;      // error-controlled: largest step; fixed: the step
+  double initial_step = kNaN;  // NaN: max_step
+  double min_step = 0.0;       // requested minimum (the working minimum is never below 1e-14 |t|)
   bool fixed_step = false;
   // Fixed-step mode: also compute the error estimate (it costs the method's
   // extra work, e.g. two half steps for VIE). Error-controlled mode always
   // estimates.
   bool error_estimate = false;
-  double accuracy = 1e-3;        // target of the weighted infinity norm of the local error
+  double accuracy = 1e-3;  // target of the weighted infinity norm of the local error
   bool throw_on_minimum_step = true;
 };
 

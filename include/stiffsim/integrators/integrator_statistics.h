@@ -33,16 +33,17 @@ struct IntegratorStatistics {
 
   // Work counters beyond Drake's.
   long newton_solves = 0;
-  long newton_trials = 0;               // Newton iterations started (rungs of the ladder tried)
-  long line_search_backtracks = 0;      // halved Newton steps
-  long merit_damping_evaluations = 0;   // damping matrices for the line-search merit
-  long energy_guard_rejections = 0;     // converged solves rejected for gaining energy               // Newton solves attempted (per step: 1, or 3 with the estimate)
-  long velocity_map_evaluations = 0;    // N(q) products and assemblies (0 when N = I)
-  long mass_matrix_assemblies = 0;      // 1 for a constant M
-  long symbolic_analyses = 0;           // sparse orderings / elimination trees
+  long newton_trials = 0;              // Newton iterations started (rungs of the ladder tried)
+  long line_search_backtracks = 0;     // halved Newton steps
+  long merit_damping_evaluations = 0;  // damping matrices for the line-search merit
+  long energy_guard_rejections = 0;    // converged solves rejected for gaining energy // Newton
+                                     // solves attempted (per step: 1, or 3 with the estimate)
+  long velocity_map_evaluations = 0;  // N(q) products and assemblies (0 when N = I)
+  long mass_matrix_assemblies = 0;    // 1 for a constant M
+  long symbolic_analyses = 0;         // sparse orderings / elimination trees
   long linear_solves = 0;
-  long dense_output_evaluations = 0;    // derivative evaluations spent on dense output
-  long jacobian_approximated_terms = 0; // definite clamps in iteration matrices (Choi & Ko)
+  long dense_output_evaluations = 0;     // derivative evaluations spent on dense output
+  long jacobian_approximated_terms = 0;  // definite clamps in iteration matrices (Choi & Ko)
   long iteration_matrix_nonzeros = 0;
   long factor_nonzeros = 0;
 
@@ -56,16 +57,16 @@ struct IntegratorStatistics {
 
 // What an integrator says about itself for reports and stats files.
 struct IntegratorReport {
-  std::string method;                 // "vie", ...
-  std::string mode;                   // "fixed-step" or "error-controlled"
-  bool error_estimate = false;        // whether the estimate was computed
+  std::string method;           // "vie", ...
+  std::string mode;             // "fixed-step" or "error-controlled"
+  bool error_estimate = false;  // whether the estimate was computed
   bool extrapolated = false;
-  std::string jacobian_scheme;        // empty for explicit methods
-  std::string newton_form;            // "mass-matrix" or "generic"
-  std::string linear_solver;          // method in use
-  std::string linear_solver_reason;   // why it was chosen
-  std::string linear_solver_fallback; // set if it fell back
-  std::vector<std::string> skipped;   // work left out because the scene does not need it
+  std::string jacobian_scheme;         // empty for explicit methods
+  std::string newton_form;             // "mass-matrix" or "generic"
+  std::string linear_solver;           // method in use
+  std::string linear_solver_reason;    // why it was chosen
+  std::string linear_solver_fallback;  // set if it fell back
+  std::vector<std::string> skipped;    // work left out because the scene does not need it
 };
 
 }  // namespace stiffsim

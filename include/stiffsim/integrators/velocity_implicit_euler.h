@@ -80,7 +80,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   std::vector<int> slots_M_, slots_D_, slots_K_, slots_Fz_, slots_Zq_, slots_Zv_, slots_Zz_;
   std::vector<int> identity_slots_;  // diagonal of the z (or generic) block
   double factored_h_ = 0.0;
-  SparseMatrix N_;       // N(q_k) when N != I
+  SparseMatrix N_;  // N(q_k) when N != I
   SparseMatrix KN_, ZqN_;
   Eigen::VectorXd x_big_, x_half_, x_small_, guess_;
   Eigen::VectorXd x_trial_, r_trial_;

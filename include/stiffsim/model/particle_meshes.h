@@ -24,7 +24,7 @@ struct ClothSpec {
   double width = 1.0, height = 1.0;
   double total_mass = 1.0;
   std::optional<SpringParameters> stretch, shear, bend;  // absent: no such springs
-  std::optional<std::vector<int>> pinned;  // absent: the two corners of row ny-1
+  std::optional<std::vector<int>> pinned;                // absent: the two corners of row ny-1
   double drag = 0.0;
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};
 };

@@ -13,10 +13,10 @@
 namespace stiffsim {
 
 struct Spring {
-  int a = 0, b = 0;            // node indices (pinned nodes allowed)
-  double rest_length = 0.0;    // L
-  double k = 0.0;              // stiffness, N/m
-  double c = 0.0;              // damping along the axis, N s/m
+  int a = 0, b = 0;          // node indices (pinned nodes allowed)
+  double rest_length = 0.0;  // L
+  double k = 0.0;            // stiffness, N/m
+  double c = 0.0;            // damping along the axis, N s/m
 };
 
 struct ParticleDescription {
@@ -24,9 +24,9 @@ struct ParticleDescription {
   std::vector<Eigen::Vector3d> positions;  // every node, pinned ones included
   std::vector<double> masses;              // every node, > 0
   std::vector<Spring> springs;
-  std::vector<int> pinned;                 // node indices; not degrees of freedom
+  std::vector<int> pinned;  // node indices; not degrees of freedom
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};
-  double drag = 0.0;                       // alpha: f_i += -alpha m_i v_i
+  double drag = 0.0;  // alpha: f_i += -alpha m_i v_i
 };
 
 class ParticleSystem : public System {
@@ -46,8 +46,8 @@ class ParticleSystem : public System {
 
   const SparseMatrix& mass_matrix_pattern() const override;
   void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
-  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-              const ConstVectorRef& z, VectorRef F) const override;
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
+              VectorRef F) const override;
   const ForceJacobians& jacobian_pattern() const override;
   // dF/dv keeps only c u u^T: the derivative of the damping force through
   // u(x) is dropped from dF/dq (MODELS.md allows it; it changes the Newton
