@@ -84,6 +84,7 @@ void VelocityImplicitEuler::do_initialize() {
   jacobians_valid_ = false;
   invalidate_factorization();
   factored_h_ = 0.0;
+  jacobian_step_t_ = jacobian_step_h_ = std::numeric_limits<double>::quiet_NaN();
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &guess_, &dx_}) v->resize(d.nx());
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(d.ny());
   x_trial_.resize(d.nx());
@@ -145,6 +146,8 @@ bool VelocityImplicitEuler::form_and_factor(double h) {
 void VelocityImplicitEuler::compute_jacobian_and_factor(double t, const Eigen::VectorXd& x,
                                                         double h) {
   compute_jacobian(t, x, h);
+  jacobian_step_t_ = t;
+  jacobian_step_h_ = h;
   form_and_factor(h);
 }
 
@@ -174,28 +177,36 @@ void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x,
   }
 }
 
-bool VelocityImplicitEuler::refresh_matrices(double t, const Eigen::VectorXd& x, double h,
-                                             int trial) {
-  // The reuse ladder (DESIGN.md section 2, Drake's MaybeFreshenVelocityMatrices).
+VelocityImplicitEuler::Refresh VelocityImplicitEuler::refresh_matrices(
+    double t, const Eigen::VectorXd& x, double h, int trial) {
+  // The reuse ladder (DESIGN.md section 2, Drake's MaybeFreshenVelocityMatrices),
+  // without its two no-ops: refactoring the last Jacobian at the h it was
+  // factored with, and recomputing a Jacobian already evaluated for this very
+  // step start and h, reproduce the matrix that just failed.
+  const bool fresh = jacobian_step_t_ == t && jacobian_step_h_ == h;
   if (!reuse_enabled() || !jacobians_valid_) {
     compute_jacobian_and_factor(t, x, h);
-    return true;
+    return Refresh::kProceed;
   }
   if (!iteration_matrix_factored() && trial == 1) {
     form_and_factor(h);
-    return true;
+    return Refresh::kProceed;
   }
   switch (trial) {
     case 1:  // reuse the last factorization as is, even from another h
-      return true;
+      return Refresh::kProceed;
     case 2:  // refactor with the current h from the last Jacobian
-      form_and_factor(h);
-      return true;
+      if (factored_h_ != h) {
+        form_and_factor(h);
+        return Refresh::kProceed;
+      }
+      [[fallthrough]];
     case 3:  // fresh Jacobian, refactor
+      if (fresh) return Refresh::kSkip;
       compute_jacobian_and_factor(t, x, h);
-      return true;
+      return Refresh::kProceed;
     default:  // give up: the caller shrinks h
-      return false;
+      return Refresh::kGiveUp;
   }
 }
 
@@ -281,7 +292,6 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
                                    const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x) {
   const Dimensions& d = dims_;
   const double tf = t0 + h;
-  ++stats_.newton_trials;
   *x = guess;
   advance_positions(h, x0, x);
   // The last rung before shrinking h is a full Newton iteration: a step that
@@ -289,9 +299,10 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
   // no transverse stiffness) converges once the Jacobian follows the iterate.
   const bool full_newton = implicit_.full_newton || trial == kFullNewtonTrial;
   if (!full_newton) {
-    if (!refresh_matrices(t0, x0, h, trial)) return false;
+    if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
     if (!iteration_matrix_factored()) return false;
   }
+  ++stats_.newton_trials;
   residual(tf, h, x0, *x, &r_);
   if (use_potential_merit_) g_scale_ = std::abs(system_.energy(state_));
   mass_diagonal_ =
@@ -308,6 +319,7 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
     if (full_newton) {
       // Linearize at the current iterate itself (positions already advanced).
       compute_jacobian(tf, *x, 0.0);
+      jacobian_step_t_ = std::numeric_limits<double>::quiet_NaN();
       if (!form_and_factor(h)) return false;
     }
     ++stats_.newton_raphson_iterations;

@@ -33,7 +33,7 @@ struct IntegratorStatistics {
 
   // Work counters beyond Drake's.
   long newton_solves = 0;
-  long newton_trials = 0;              // Newton iterations started (rungs of the ladder tried)
+  long newton_trials = 0;              // Newton iterations started (ladder rungs that ran)
   long line_search_backtracks = 0;     // halved Newton steps
   long merit_damping_evaluations = 0;  // damping matrices for the line-search merit
   long energy_guard_rejections = 0;    // converged solves rejected for gaining energy // Newton

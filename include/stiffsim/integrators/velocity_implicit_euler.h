@@ -40,8 +40,10 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
                   Eigen::VectorXd* x);
   bool newton(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
               int trial, Eigen::VectorXd* x);
-  // The refresh ladder: returns false when trial 4 says give up.
-  bool refresh_matrices(double t, const Eigen::VectorXd& x, double h, int trial);
+  // The refresh ladder: kSkip when the rung would rebuild the matrix that
+  // just failed, kGiveUp at trial 4.
+  enum class Refresh { kProceed, kSkip, kGiveUp };
+  Refresh refresh_matrices(double t, const Eigen::VectorXd& x, double h, int trial);
   void compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h);
   // Force Jacobians at (t, q + h N(q) v, y) for the state x.
   void compute_jacobian(double t, const Eigen::VectorXd& x, double h);
@@ -80,6 +82,9 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   std::vector<int> slots_M_, slots_D_, slots_K_, slots_Fz_, slots_Zq_, slots_Zv_, slots_Zz_;
   std::vector<int> identity_slots_;  // diagonal of the z (or generic) block
   double factored_h_ = 0.0;
+  // Step start and h of the Jacobian the ladder last evaluated (NaN after a
+  // full-Newton iterate replaced it).
+  double jacobian_step_t_ = 0.0, jacobian_step_h_ = 0.0;
   SparseMatrix N_;  // N(q_k) when N != I
   SparseMatrix KN_, ZqN_;
   Eigen::VectorXd x_big_, x_half_, x_small_, guess_;
