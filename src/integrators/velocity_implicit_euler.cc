@@ -332,13 +332,18 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
     // where buckled stiff springs gain energy. Otherwise the residual norm
     // is the merit. The full step is taken whenever it qualifies; the trial
     // residual is then the next iteration's, at no extra cost.
+    // The potential costs a damping-matrix evaluation per iteration, so the
+    // reuse rungs (1, 2), whose solves are the common and easy ones, use
+    // the residual with the energy guard behind it; the rungs that follow a
+    // failure (3, 4), where spurious roots are met, use G.
+    const bool use_potential = use_potential_merit_ && trial >= 3;
     double g_current = 0.0, slope = 0.0;
-    if (use_potential_merit_) {
+    if (use_potential) {
       evaluate_damping(tf, *x);
       g_current = incremental_potential(tf, x0, *x, h);
       slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G_k
     }
-    const bool potential_search = use_potential_merit_ && slope < 0.0;
+    const bool potential_search = use_potential && slope < 0.0;
     double alpha = 1.0;
     for (int backtrack = 0;; ++backtrack) {
       x_trial_ = *x;
