@@ -1,18 +1,12 @@
 #include "stiffsim/integrators/implicit_integrator.h"
 
-#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/wall_clock.h"
 
 namespace stiffsim {
-namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
-}  // namespace
 
 JacobianScheme parse_jacobian_scheme(const std::string& name) {
   if (name == "analytic") return JacobianScheme::kAnalytic;
@@ -90,7 +84,7 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
 }
 
 void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd& x) {
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   JacobianRequest request;
   request.definite = implicit_.definite_iteration_matrix;
   system_.force_jacobians(t, x.segment(0, dims_.nq), x.segment(dims_.nq, dims_.nv),
@@ -104,13 +98,13 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
 bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric) {
   if (!solver_.solver) {
     solver_ = make_linear_solver(implicit_.linear_solver, matrix, symmetric);
-    const auto start = Clock::now();
+    const auto start = WallClock::now();
     solver_.solver->analyze(matrix);
     stats_.factorization_seconds += seconds_since(start);
     ++stats_.symbolic_analyses;
     stats_.iteration_matrix_nonzeros = matrix.nonZeros();
   }
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   factored_ = solver_.solver->factorize(matrix);
   stats_.factorization_seconds += seconds_since(start);
   ++stats_.iteration_matrix_factorizations;
@@ -119,7 +113,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
 }
 
 void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   solver_.solver->solve(rhs, dx);
   stats_.solve_seconds += seconds_since(start);
   ++stats_.linear_solves;

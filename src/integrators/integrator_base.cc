@@ -1,21 +1,16 @@
 #include "stiffsim/integrators/integrator_base.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
 #include <sstream>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/wall_clock.h"
 
 namespace stiffsim {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // Step-size controller constants (Drake takes them from Simbody; see
 // reference/drake_integrators.md section 3.4).
@@ -235,7 +230,7 @@ void IntegratorBase::integrate_to(double t_final) {
 
 const SparseMatrix& IntegratorBase::mass_matrix_at(const ConstVectorRef& q) {
   if (caps_.constant_mass_matrix && mass_matrix_valid_) return mass_matrix_;
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   system_.mass_matrix(q, &mass_matrix_);
   stats_.assembly_seconds += seconds_since(start);
   ++stats_.mass_matrix_assemblies;
@@ -246,7 +241,7 @@ const SparseMatrix& IntegratorBase::mass_matrix_at(const ConstVectorRef& q) {
 
 void IntegratorBase::evaluate_forces(double t, const Eigen::VectorXd& x, Eigen::VectorXd* F,
                                      Eigen::VectorXd* zdot) {
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   const auto q = x.segment(0, dims_.nq);
   const auto v = x.segment(dims_.nq, dims_.nv);
   const auto z = x.segment(dims_.nq + dims_.nv, dims_.nz);

@@ -1,18 +1,17 @@
 #include "stiffsim/integrators/simulator.h"
 
-#include <chrono>
 #include <cmath>
+
+#include "stiffsim/integrators/wall_clock.h"
 
 namespace stiffsim {
 
 SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
                           const ProgressCallback& on_progress) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = WallClock::now();
   SimulationResult result;
-  auto elapsed = [&] {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  };
+  auto elapsed = [&] { return seconds_since(start); };
   integrator.initialize(initial);
   const double t_final = settings.t_final;
   const double period = settings.sample_period;

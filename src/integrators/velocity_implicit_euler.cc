@@ -1,16 +1,12 @@
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 
-#include <chrono>
 #include <cmath>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/wall_clock.h"
 
 namespace stiffsim {
 namespace {
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) {
-  return std::chrono::duration<double>(Clock::now() - start).count();
-}
 
 // Structural product A * B (pattern only), so the pattern of K N(q) is known
 // before any value is.
@@ -109,7 +105,7 @@ void VelocityImplicitEuler::do_initialize() {
 }
 
 bool VelocityImplicitEuler::form_and_factor(double h) {
-  const auto start = Clock::now();
+  const auto start = WallClock::now();
   const Dimensions& d = dims_;
   const ForceJacobians& J = jacobians_;
   SparseMatrix& W = iteration_matrix_;
@@ -177,8 +173,9 @@ void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x,
   }
 }
 
-VelocityImplicitEuler::Refresh VelocityImplicitEuler::refresh_matrices(
-    double t, const Eigen::VectorXd& x, double h, int trial) {
+VelocityImplicitEuler::Refresh VelocityImplicitEuler::refresh_matrices(double t,
+                                                                       const Eigen::VectorXd& x,
+                                                                       double h, int trial) {
   // The reuse ladder (DESIGN.md section 2, Drake's MaybeFreshenVelocityMatrices),
   // without its two no-ops: refactoring the last Jacobian at the h it was
   // factored with, and recomputing a Jacobian already evaluated for this very
@@ -390,7 +387,7 @@ bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x
 }
 
 void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = WallClock::now();
   const Dimensions& d = dims_;
   system_.force_jacobians(t, x.segment(0, d.nq), x.segment(d.nq, d.nv),
                           x.segment(d.nq + d.nv, d.nz), JacobianRequest{}, &merit_jacobians_);

@@ -37,10 +37,10 @@ struct IntegratorStatistics {
   long line_search_backtracks = 0;     // halved Newton steps
   long merit_damping_evaluations = 0;  // damping matrices for the line-search merit
   long energy_guard_rejections = 0;    // converged solves rejected for gaining energy // Newton
-                                     // solves attempted (per step: 1, or 3 with the estimate)
-  long velocity_map_evaluations = 0;  // N(q) products and assemblies (0 when N = I)
-  long mass_matrix_assemblies = 0;    // 1 for a constant M
-  long symbolic_analyses = 0;         // sparse orderings / elimination trees
+                                       // solves attempted (per step: 1, or 3 with the estimate)
+  long velocity_map_evaluations = 0;   // N(q) products and assemblies (0 when N = I)
+  long mass_matrix_assemblies = 0;     // 1 for a constant M
+  long symbolic_analyses = 0;          // sparse orderings / elimination trees
   long linear_solves = 0;
   long dense_output_evaluations = 0;     // derivative evaluations spent on dense output
   long jacobian_approximated_terms = 0;  // definite clamps in iteration matrices (Choi & Ko)
