@@ -121,7 +121,7 @@ void add_run_options(CLI::App* run, RunOptions* o) {
   const std::string newton = "Implicit integrators (override the scene)";
   o->jacobian_option = run->add_option("--jacobian", o->jacobian,
                                        "Force Jacobians: " + join(jacobian_scheme_names(), ", ") +
-                                           " (finite differences use a sparse column colouring)")
+                                           " (only analytic is available so far)")
                            ->check(CLI::IsMember(jacobian_scheme_names()))
                            ->group(newton);
   o->linear_solver_option =
