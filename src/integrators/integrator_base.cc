@@ -72,7 +72,6 @@ void IntegratorBase::initialize(const State& initial) {
   dense_f1_.resize(dims_.nx());
   work_F_.resize(dims_.nv);
   work_zdot_.resize(dims_.nz);
-  work_qdot_.resize(dims_.nq);
   work_vdot_.resize(dims_.nv);
   do_initialize();
 }

@@ -114,7 +114,7 @@ class IntegratorBase {
   // Dense output workspace.
   bool dense_valid_ = false;
   Eigen::VectorXd dense_f0_, dense_f1_;
-  Eigen::VectorXd work_F_, work_zdot_, work_qdot_, work_vdot_;
+  Eigen::VectorXd work_F_, work_zdot_, work_vdot_;
 };
 
 }  // namespace stiffsim

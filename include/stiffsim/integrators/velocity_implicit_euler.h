@@ -90,7 +90,6 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   Eigen::VectorXd x_big_, x_half_, x_small_, guess_;
   Eigen::VectorXd x_trial_, r_trial_;
   Eigen::VectorXd r_, dy_, dx_, qdot_, F_, zdot_, q_prev_;
-  Eigen::VectorXd inverse_mass_diagonal_;  // generic form with diagonal M
 };
 
 }  // namespace stiffsim
