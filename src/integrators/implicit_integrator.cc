@@ -41,6 +41,16 @@ std::string to_string(NewtonForm form) {
   return form == NewtonForm::kMassMatrix ? "mass-matrix" : "generic";
 }
 
+ImplicitErrorEstimate parse_error_estimator(const std::string& name) {
+  if (name == "trapezoid") return ImplicitErrorEstimate::kTrapezoid;
+  if (name == "doubling") return ImplicitErrorEstimate::kStepDoubling;
+  throw InputError("unknown error estimator '" + name + "' (expected trapezoid or doubling)");
+}
+
+std::string to_string(ImplicitErrorEstimate estimator) {
+  return estimator == ImplicitErrorEstimate::kTrapezoid ? "trapezoid" : "doubling";
+}
+
 ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings settings,
                                        ImplicitSettings implicit)
     : IntegratorBase(system, settings), implicit_(implicit) {
@@ -95,38 +105,277 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   jacobians_valid_ = true;
 }
 
-bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric) {
-  if (!solver_.solver) {
-    solver_ = make_linear_solver(implicit_.linear_solver, matrix, symmetric);
+bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric,
+                                                 double h) {
+  IterationMatrix& m = matrices_[active_];
+  m.h = h;
+  if (!m.solver.solver) {
+    m.solver = make_linear_solver(implicit_.linear_solver, matrix, symmetric);
     const auto start = WallClock::now();
-    solver_.solver->analyze(matrix);
+    m.solver.solver->analyze(matrix);
     stats_.factorization_seconds += seconds_since(start);
     ++stats_.symbolic_analyses;
     stats_.iteration_matrix_nonzeros = matrix.nonZeros();
   }
   const auto start = WallClock::now();
-  factored_ = solver_.solver->factorize(matrix);
+  m.factored = m.solver.solver->factorize(matrix);
   stats_.factorization_seconds += seconds_since(start);
   ++stats_.iteration_matrix_factorizations;
-  if (factored_) stats_.factor_nonzeros = solver_.solver->factor_nonzeros();
-  return factored_;
+  if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
+  return m.factored;
 }
 
 void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
   const auto start = WallClock::now();
-  solver_.solver->solve(rhs, dx);
+  matrices_[active_].solver.solver->solve(rhs, dx);
   stats_.solve_seconds += seconds_since(start);
   ++stats_.linear_solves;
+}
+
+void ImplicitIntegrator::initialize_newton(int unknowns) {
+  const int nx = dims_.nx();
+  for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_}) v->resize(nx);
+  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(unknowns);
+  x_prev_.resize(nx);
+  energy_state_.x = Eigen::VectorXd::Zero(nx);
+  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive;
+  jacobians_valid_ = false;
+  invalidate_factorization();
+  for (auto& m : matrices_) m.h = 0.0;
+  active_ = 0;
+  jacobian_step_t_ = jacobian_step_h_ = std::numeric_limits<double>::quiet_NaN();
+}
+
+void ImplicitIntegrator::compute_jacobian_and_factor(double t, const Eigen::VectorXd& x,
+                                                     double h) {
+  compute_jacobian(t, x, h);
+  jacobian_step_t_ = t;
+  jacobian_step_h_ = h;
+  form_and_factor(h);
+}
+
+ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const Eigen::VectorXd& x,
+                                                                 double h, int trial) {
+  // The reuse ladder (DESIGN.md section 2, Drake's MaybeFreshenMatrices),
+  // without its two no-ops: refactoring the last Jacobian at the h it was
+  // factored with, and recomputing a Jacobian already evaluated for this very
+  // step start (and h, where the Jacobian depends on it), reproduce the
+  // matrix that just failed.
+  const bool fresh =
+      jacobian_step_t_ == t && (!jacobian_depends_on_step() || jacobian_step_h_ == h);
+  if (!reuse_enabled() || !jacobians_valid_) {
+    compute_jacobian_and_factor(t, x, h);
+    return Refresh::kProceed;
+  }
+  if (!iteration_matrix_factored() && trial == 1) {
+    form_and_factor(h);
+    return Refresh::kProceed;
+  }
+  switch (trial) {
+    case 1:  // reuse the last factorization as is, even from another h
+      return Refresh::kProceed;
+    case 2:  // refactor with the current h from the last Jacobian
+      if (matrices_[active_].h != h) {
+        form_and_factor(h);
+        return Refresh::kProceed;
+      }
+      [[fallthrough]];
+    case 3:  // fresh Jacobian, refactor
+      if (fresh) return Refresh::kSkip;
+      compute_jacobian_and_factor(t, x, h);
+      return Refresh::kProceed;
+    default:  // give up: the caller shrinks h
+      return Refresh::kGiveUp;
+  }
+}
+
+bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
+                                const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x) {
+  const double tf = t0 + h;
+  const int offset = unknowns_offset();
+  const int n = static_cast<int>(r_.size());
+  *x = guess;
+  complete_iterate(h, x0, x);
+  // The last rung before shrinking h is a full Newton iteration: a step that
+  // starts where the linearization is degenerate (a flat membrane at rest has
+  // no transverse stiffness) converges once the Jacobian follows the iterate.
+  const bool full_newton = implicit_.full_newton || trial == kFullNewtonTrial;
+  if (!full_newton) {
+    if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
+    if (!iteration_matrix_factored()) return false;
+  }
+  ++stats_.newton_trials;
+  begin_newton(t0, h, x0);
+  residual(tf, h, x0, *x, &r_);
+  double r_merit = merit(r_);
+  double last_norm = std::numeric_limits<double>::infinity();
+  // The last rung converges (at least linearly with the definite clamp) but
+  // may need more iterations than a fresh modified Newton; giving it three
+  // times the budget is cheaper than halving the step.
+  const int max_iterations = trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
+                                                       : implicit_.max_newton_iterations;
+  for (int i = 0; i < max_iterations; ++i) {
+    if (full_newton) {
+      // Linearize at the current iterate itself.
+      compute_jacobian(tf, *x, 0.0);
+      mark_jacobian_stale();
+      if (!form_and_factor(h)) return false;
+    }
+    ++stats_.newton_raphson_iterations;
+    r_ = -r_;
+    solve_iteration_matrix(r_, &dy_);
+    // Line search. Where the method has a potential G (VIE's incremental
+    // potential), the Newton direction of an SPD iteration matrix descends
+    // G whatever approximations it holds, so the search heads for a
+    // minimizer of G and never climbs to a saddle, a spurious root of the
+    // step equations. Otherwise the residual norm is the merit. The full
+    // step is taken whenever it qualifies; the trial residual is then the
+    // next iteration's, at no extra cost.
+    const bool use_potential = potential_search(trial);
+    double g_current = 0.0, slope = 0.0;
+    if (use_potential) {
+      g_current = potential(tf, x0, *x, h, true);
+      slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G
+    }
+    const bool descend_potential = use_potential && slope < 0.0;
+    double alpha = 1.0;
+    for (int backtrack = 0;; ++backtrack) {
+      x_trial_ = *x;
+      x_trial_.segment(offset, n) += alpha * dy_;
+      complete_iterate(h, x0, &x_trial_);
+      residual(tf, h, x0, x_trial_, &r_trial_);
+      const double trial_merit = merit(r_trial_);
+      bool accept = std::isfinite(trial_merit);
+      if (accept && descend_potential) {
+        const double g_trial = potential(tf, x0, x_trial_, h, false);
+        // Near the solution G changes by less than its own round-off; there
+        // a G that did not measurably rise and a smaller residual decide.
+        const double roundoff = potential_roundoff(g_current);
+        accept = g_trial <= g_current + 1e-4 * alpha * slope ||
+                 (g_trial <= g_current + roundoff && trial_merit < r_merit);
+      } else if (accept) {
+        accept = trial_merit <= (1.0 - 1e-4 * alpha) * r_merit;
+      }
+      if (accept) {
+        r_merit = trial_merit;
+        break;
+      }
+      if (backtrack == kMaxBacktracks) return false;
+      alpha *= 0.5;
+      ++stats_.line_search_backtracks;
+    }
+    dx_ = x_trial_ - *x;
+    x->swap(x_trial_);
+    r_.swap(r_trial_);
+    const double norm = state_change_norm(dx_);
+    if (alpha < 1.0) {
+      // A damped step says nothing about the rate of the undamped iteration.
+      last_norm = std::numeric_limits<double>::infinity();
+      continue;
+    }
+    const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
+    if (c == Convergence::kConverged) return passes_energy_guard(x0, *x, true);
+    if (c == Convergence::kDiverged) return false;
+    last_norm = norm;
+  }
+  return false;
+}
+
+bool ImplicitIntegrator::passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                                             bool count) {
+  // For a scene whose forces are conservative or dissipative, an implicit
+  // Euler step that gains energy has found a spurious root of the step
+  // equations (a buckled or inverted configuration of stiff springs reached
+  // at a large h): the attempt counts as a failure and the step shrinks.
+  if (!guard_energy_) return true;
+  energy_state_.x = x0;
+  const double before = system_.energy(energy_state_);
+  energy_state_.x = x;
+  const double after = system_.energy(energy_state_);
+  // Round-off of the energy sums and the Newton tolerance's share.
+  const double allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
+  if (after <= before + allowance) return true;
+  if (count) ++stats_.energy_guard_rejections;
+  return false;
+}
+
+bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& x0,
+                                    const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
+  ++stats_.newton_solves;
+  for (int trial = 1; trial <= kFullNewtonTrial; ++trial) {
+    if (newton(t0, h, x0, guess, trial, x)) {
+      if (caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));
+      return true;
+    }
+    if (!reuse_enabled()) return false;
+  }
+  return false;
+}
+
+void ImplicitIntegrator::add_estimator_share(const IntegratorStatistics& before,
+                                             IntegratorStatistics* stats) {
+  stats->error_estimator_derivative_evaluations +=
+      stats->derivative_evaluations - before.derivative_evaluations;
+  stats->error_estimator_derivative_evaluations_for_jacobian +=
+      stats->derivative_evaluations_for_jacobian - before.derivative_evaluations_for_jacobian;
+  stats->error_estimator_jacobian_evaluations +=
+      stats->jacobian_evaluations - before.jacobian_evaluations;
+  stats->error_estimator_iteration_matrix_factorizations +=
+      stats->iteration_matrix_factorizations - before.iteration_matrix_factorizations;
+  stats->error_estimator_newton_raphson_iterations +=
+      stats->newton_raphson_iterations - before.newton_raphson_iterations;
+}
+
+bool ImplicitIntegrator::step_doubling(double h) {
+  const double t0 = state_.t;
+  const Eigen::VectorXd& x0 = state_.x;
+  // The large step is the error estimator's share of the work (as in Drake).
+  // It is tried first because it fails to converge more often.
+  const IntegratorStatistics before = stats_;
+  const bool big_ok = solve_step(t0, h, x0, x0, &x_big_);
+  add_estimator_share(before, &stats_);
+  if (!big_ok) return false;
+
+  x_half_ = 0.5 * (x0 + x_big_);
+  if (!solve_step(t0, 0.5 * h, x0, x_half_, &x_small_)) return false;
+  x_half_.swap(x_small_);
+  if (!solve_step(t0 + 0.5 * h, 0.5 * h, x_half_, x_big_, &x_small_)) return false;
+  // x_big - x_small = (h^2/4) x'' + O(h^3): the local error of the half-step
+  // result to leading order. For the extrapolated result 2 x_small - x_big,
+  // whose local error is O(h^3), it is a conservative bound: the controller
+  // keeps order 2 (see error_estimate_order()).
+  if (estimating_error()) error_ = x_big_ - x_small_;
+  if (implicit_.extrapolate) {
+    // x_e = 2 x_small - x_big cancels the h^2 term of the local error. Its
+    // stability function 2 / (1 - z/2)^2 - 1 / (1 - z) is bounded by 1 on
+    // the imaginary axis and tends to 0 as z -> -inf: still L-stable.
+    candidate_ = 2.0 * x_small_ - x_big_;
+    if (caps_.has_quaternions) system_.project_positions(candidate_.segment(0, dims_.nq));
+    // Linear stability is not the whole story on stiff nonlinear scenes: the
+    // two results lie near the manifold where stiff springs sit at their
+    // rest lengths, but a combination of two points of a curved manifold is
+    // off it, and a stiff spring turns that distance into energy. In a
+    // passive scene such a step propagates x_small, which passed the guard.
+    if (guard_energy_ && !passes_energy_guard(x0, candidate_, false)) {
+      ++stats_.extrapolation_rejections;
+      candidate_.swap(x_small_);
+    }
+  } else {
+    candidate_.swap(x_small_);
+  }
+  return true;
 }
 
 IntegratorReport ImplicitIntegrator::report() const {
   IntegratorReport r = IntegratorBase::report();
   r.jacobian_scheme = to_string(implicit_.jacobian);
   r.newton_form = to_string(implicit_.newton_form);
-  if (solver_.solver) {
-    r.linear_solver = solver_.solver->method();
-    r.linear_solver_reason = solver_.reason;
-    r.linear_solver_fallback = solver_.solver->fallback_note();
+  r.extrapolated = implicit_.extrapolate;
+  const LinearSolverChoice& solver = matrices_[0].solver;
+  if (solver.solver) {
+    r.linear_solver = solver.solver->method();
+    r.linear_solver_reason = solver.reason;
+    r.linear_solver_fallback = solver.solver->fallback_note();
   }
   return r;
 }

@@ -5,12 +5,19 @@
 
 namespace stiffsim {
 
-std::vector<std::string> integrator_names() { return {"vie"}; }
+std::vector<std::string> integrator_names() { return {"vie", "vie2"}; }
 
 std::unique_ptr<IntegratorBase> make_integrator(const std::string& name, const System& system,
                                                 const IntegratorSettings& settings,
                                                 const ImplicitSettings& implicit) {
+  // The "2" variants are their first-order method with local extrapolation
+  // of the step-doubling pair.
+  ImplicitSettings extrapolated = implicit;
+  extrapolated.extrapolate = true;
   if (name == "vie") return std::make_unique<VelocityImplicitEuler>(system, settings, implicit);
+  if (name == "vie2") {
+    return std::make_unique<VelocityImplicitEuler>(system, settings, extrapolated);
+  }
   std::string known;
   for (const auto& n : integrator_names()) known += (known.empty() ? "" : ", ") + n;
   throw InputError("unknown integrator '" + name + "' (expected one of: " + known + ")");

@@ -77,15 +77,9 @@ void VelocityImplicitEuler::do_initialize() {
   identity_slots_.resize(d.ny());
   for (int i = 0; i < d.ny(); ++i) identity_slots_[i] = slot_of(iteration_matrix_, i, i);
 
-  jacobians_valid_ = false;
-  invalidate_factorization();
-  factored_h_ = 0.0;
-  jacobian_step_t_ = jacobian_step_h_ = std::numeric_limits<double>::quiet_NaN();
-  for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &guess_, &dx_}) v->resize(d.nx());
-  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(d.ny());
-  x_trial_.resize(d.nx());
+  initialize_newton(d.ny());
+  linearization_.resize(d.nx());
   energy_state_.x = Eigen::VectorXd::Zero(d.nx());
-  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive;
   // G is a valid merit where the residual is its gradient: the mass-matrix
   // form of a passive scene with energy, analytic Jacobians, N = I, a
   // constant diagonal M and no z states.
@@ -99,7 +93,6 @@ void VelocityImplicitEuler::do_initialize() {
     g_scale_ = 0.0;
   }
   qdot_.resize(d.nq);
-  q_prev_.resize(d.nq);
   F_.resize(d.nv);
   zdot_.resize(d.nz);
 }
@@ -131,36 +124,30 @@ bool VelocityImplicitEuler::form_and_factor(double h) {
   scatter_add(Zq, slots_Zq_, -h * h, &W);
   scatter_add(J.dfz_dz, slots_Zz_, -h, &W);
   stats_.assembly_seconds += seconds_since(start);
-  factored_h_ = h;
   // Symmetric (so CHOLMOD applies) for conservative particle-like systems:
   // N = I, no z coupling, symmetric K and D, and the mass-matrix form.
+  // Finite-difference and automatic Jacobians carry the unsymmetric terms
+  // the analytic ones drop.
   const bool symmetric = implicit_.newton_form == NewtonForm::kMassMatrix &&
+                         implicit_.jacobian == JacobianScheme::kAnalytic &&
                          caps_.symmetric_jacobians && caps_.identity_velocity_map && d.nz == 0;
-  return factor_iteration_matrix(W, symmetric);
-}
-
-void VelocityImplicitEuler::compute_jacobian_and_factor(double t, const Eigen::VectorXd& x,
-                                                        double h) {
-  compute_jacobian(t, x, h);
-  jacobian_step_t_ = t;
-  jacobian_step_h_ = h;
-  form_and_factor(h);
+  return factor_iteration_matrix(W, symmetric, h);
 }
 
 void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double h) {
   const Dimensions& d = dims_;
   // Linearize where the step is heading: q_n + h N(q_n) v_n, as Drake does.
-  guess_ = x;
+  linearization_ = x;
   if (caps_.identity_velocity_map) {
-    guess_.segment(0, d.nq) += h * x.segment(d.nq, d.nv);
+    linearization_.segment(0, d.nq) += h * x.segment(d.nq, d.nv);
   } else {
     system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), qdot_);
     ++stats_.velocity_map_evaluations;
-    guess_.segment(0, d.nq) += h * qdot_;
+    linearization_.segment(0, d.nq) += h * qdot_;
     system_.velocity_map(x.segment(0, d.nq), &N_);
     ++stats_.velocity_map_evaluations;
   }
-  compute_force_jacobians(t, guess_);
+  compute_force_jacobians(t, linearization_);
   if (!caps_.identity_velocity_map) {
     // The products K N and dfz/dq N keep their (structural) pattern; their
     // slots are looked up again because Eigen may order a product freshly.
@@ -173,57 +160,23 @@ void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x,
   }
 }
 
-VelocityImplicitEuler::Refresh VelocityImplicitEuler::refresh_matrices(double t,
-                                                                       const Eigen::VectorXd& x,
-                                                                       double h, int trial) {
-  // The reuse ladder (DESIGN.md section 2, Drake's MaybeFreshenVelocityMatrices),
-  // without its two no-ops: refactoring the last Jacobian at the h it was
-  // factored with, and recomputing a Jacobian already evaluated for this very
-  // step start and h, reproduce the matrix that just failed.
-  const bool fresh = jacobian_step_t_ == t && jacobian_step_h_ == h;
-  if (!reuse_enabled() || !jacobians_valid_) {
-    compute_jacobian_and_factor(t, x, h);
-    return Refresh::kProceed;
-  }
-  if (!iteration_matrix_factored() && trial == 1) {
-    form_and_factor(h);
-    return Refresh::kProceed;
-  }
-  switch (trial) {
-    case 1:  // reuse the last factorization as is, even from another h
-      return Refresh::kProceed;
-    case 2:  // refactor with the current h from the last Jacobian
-      if (factored_h_ != h) {
-        form_and_factor(h);
-        return Refresh::kProceed;
-      }
-      [[fallthrough]];
-    case 3:  // fresh Jacobian, refactor
-      if (fresh) return Refresh::kSkip;
-      compute_jacobian_and_factor(t, x, h);
-      return Refresh::kProceed;
-    default:  // give up: the caller shrinks h
-      return Refresh::kGiveUp;
-  }
-}
-
 void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& x0,
                                      const Eigen::VectorXd& x, Eigen::VectorXd* r) {
   // The residual is exact: q = q_n + h N(q_k) v is rebuilt from the current
   // v before F is evaluated, as in Drake's l(y).
   const Dimensions& d = dims_;
-  guess_ = x;
+  linearization_ = x;
   if (caps_.identity_velocity_map) {
-    guess_.segment(0, d.nq) = x0.segment(0, d.nq) + h * x.segment(d.nq, d.nv);
+    linearization_.segment(0, d.nq) = x0.segment(0, d.nq) + h * x.segment(d.nq, d.nv);
   } else {
     system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), qdot_);
     ++stats_.velocity_map_evaluations;
-    guess_.segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
+    linearization_.segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
   }
-  evaluate_forces(t, guess_, &F_, &zdot_);
+  evaluate_forces(t, linearization_, &F_, &zdot_);
   const auto v = x.segment(d.nq, d.nv);
   const auto v0 = x0.segment(d.nq, d.nv);
-  const SparseMatrix& M = mass_matrix_at(guess_.segment(0, d.nq));
+  const SparseMatrix& M = mass_matrix_at(linearization_.segment(0, d.nq));
   if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
     const double* m = M.valuePtr();
     for (int i = 0; i < d.nv; ++i) (*r)[i] = m[i] * (v[i] - v0[i]) - h * F_[i];
@@ -238,9 +191,8 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
   r->segment(d.nv, d.nz) = x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
 }
 
-void VelocityImplicitEuler::advance_positions(double h, const Eigen::VectorXd& x0,
-                                              Eigen::VectorXd* x) {
-  // q_{k+1} = q_n + h N(q_k) v_{k+1}: N lagged one iterate.
+void VelocityImplicitEuler::complete_iterate(double h, const Eigen::VectorXd& x0,
+                                             Eigen::VectorXd* x) {
   const Dimensions& d = dims_;
   if (caps_.identity_velocity_map) {
     x->segment(0, d.nq) = x0.segment(0, d.nq) + h * x->segment(d.nq, d.nv);
@@ -285,105 +237,29 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
   return inertia + potential - 0.5 * h * v.dot(Dv_);
 }
 
-bool VelocityImplicitEuler::newton(double t0, double h, const Eigen::VectorXd& x0,
-                                   const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x) {
-  const Dimensions& d = dims_;
-  const double tf = t0 + h;
-  *x = guess;
-  advance_positions(h, x0, x);
-  // The last rung before shrinking h is a full Newton iteration: a step that
-  // starts where the linearization is degenerate (a flat membrane at rest has
-  // no transverse stiffness) converges once the Jacobian follows the iterate.
-  const bool full_newton = implicit_.full_newton || trial == kFullNewtonTrial;
-  if (!full_newton) {
-    if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
-    if (!iteration_matrix_factored()) return false;
-  }
-  ++stats_.newton_trials;
-  residual(tf, h, x0, *x, &r_);
+void VelocityImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {
+  (void)t0, (void)h;
   if (use_potential_merit_) g_scale_ = std::abs(system_.energy(state_));
   mass_diagonal_ =
-      caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, d.nq)).valuePtr() : nullptr;
-  double r_merit = merit(r_);
-  q_prev_ = x->segment(0, d.nq);
-  double last_norm = std::numeric_limits<double>::infinity();
-  // The last rung converges (at least linearly with the definite clamp) but
-  // may need more iterations than a fresh modified Newton; giving it three
-  // times the budget is cheaper than halving the step.
-  const int max_iterations = trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
-                                                       : implicit_.max_newton_iterations;
-  for (int i = 0; i < max_iterations; ++i) {
-    if (full_newton) {
-      // Linearize at the current iterate itself (positions already advanced).
-      compute_jacobian(tf, *x, 0.0);
-      jacobian_step_t_ = std::numeric_limits<double>::quiet_NaN();
-      if (!form_and_factor(h)) return false;
-    }
-    ++stats_.newton_raphson_iterations;
-    r_ = -r_;
-    solve_iteration_matrix(r_, &dy_);
-    // Line search. Where the scene has an incremental potential G (see
-    // incremental_potential()), W's Newton direction descends G whatever
-    // approximations W holds, so the search heads for a minimizer of G: it
-    // never climbs to a saddle of G, a spurious root of the step equations
-    // where buckled stiff springs gain energy. Otherwise the residual norm
-    // is the merit. The full step is taken whenever it qualifies; the trial
-    // residual is then the next iteration's, at no extra cost.
-    // The potential costs a damping-matrix evaluation per iteration, so the
-    // reuse rungs (1, 2), whose solves are the common and easy ones, use
-    // the residual with the energy guard behind it; the rungs that follow a
-    // failure (3, 4), where spurious roots are met, use G.
-    const bool use_potential = use_potential_merit_ && trial >= 3;
-    double g_current = 0.0, slope = 0.0;
-    if (use_potential) {
-      evaluate_damping(tf, *x);
-      g_current = incremental_potential(tf, x0, *x, h);
-      slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G_k
-    }
-    const bool potential_search = use_potential && slope < 0.0;
-    double alpha = 1.0;
-    for (int backtrack = 0;; ++backtrack) {
-      x_trial_ = *x;
-      x_trial_.segment(d.nq, d.ny()) += alpha * dy_;
-      advance_positions(h, x0, &x_trial_);
-      residual(tf, h, x0, x_trial_, &r_trial_);
-      const double trial_merit = merit(r_trial_);
-      bool accept = std::isfinite(trial_merit);
-      if (accept && potential_search) {
-        const double g_trial = incremental_potential(tf, x0, x_trial_, h);
-        // Near the solution G changes by less than its own round-off; there
-        // a G that did not measurably rise and a smaller residual decide.
-        const double roundoff = 1e-11 * (std::abs(g_current) + g_scale_);
-        accept = g_trial <= g_current + 1e-4 * alpha * slope ||
-                 (g_trial <= g_current + roundoff && trial_merit < r_merit);
-      } else if (accept) {
-        accept = trial_merit <= (1.0 - 1e-4 * alpha) * r_merit;
-      }
-      if (accept) {
-        r_merit = trial_merit;
-        break;
-      }
-      if (backtrack == kMaxBacktracks) return false;
-      alpha *= 0.5;
-      ++stats_.line_search_backtracks;
-    }
-    x->swap(x_trial_);
-    r_.swap(r_trial_);
-    dx_.segment(0, d.nq) = x->segment(0, d.nq) - q_prev_;
-    dx_.segment(d.nq, d.ny()) = alpha * dy_;
-    q_prev_ = x->segment(0, d.nq);
-    const double norm = state_change_norm(dx_);
-    if (alpha < 1.0) {
-      // A damped step says nothing about the rate of the undamped iteration.
-      last_norm = std::numeric_limits<double>::infinity();
-      continue;
-    }
-    const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
-    if (c == Convergence::kConverged) return passes_energy_guard(x0, *x);
-    if (c == Convergence::kDiverged) return false;
-    last_norm = norm;
-  }
-  return false;
+      caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, dims_.nq)).valuePtr() : nullptr;
+}
+
+bool VelocityImplicitEuler::potential_search(int trial) const {
+  // The potential costs a damping-matrix evaluation per iteration, so the
+  // reuse rungs (1, 2), whose solves are the common and easy ones, use the
+  // residual with the energy guard behind it; the rungs that follow a
+  // failure (3, 4), where spurious roots are met, use G.
+  return use_potential_merit_ && trial >= 3;
+}
+
+double VelocityImplicitEuler::potential(double t, const Eigen::VectorXd& x0,
+                                        const Eigen::VectorXd& x, double h, bool new_iterate) {
+  if (new_iterate) evaluate_damping(t, x);
+  return incremental_potential(t, x0, x, h);
+}
+
+double VelocityImplicitEuler::potential_roundoff(double g) const {
+  return 1e-11 * (std::abs(g) + g_scale_);
 }
 
 void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x) {
@@ -395,65 +271,11 @@ void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x)
   stats_.jacobian_seconds += seconds_since(start);
 }
 
-bool VelocityImplicitEuler::passes_energy_guard(const Eigen::VectorXd& x0,
-                                                const Eigen::VectorXd& x) {
-  // For a scene whose forces are conservative or dissipative, an implicit
-  // Euler step that gains energy has found a spurious root of the step
-  // equations (a buckled or inverted configuration of stiff springs reached
-  // at a large h): the attempt counts as a failure and the step shrinks.
-  if (!guard_energy_) return true;
-  energy_state_.x = x0;
-  const double before = system_.energy(energy_state_);
-  energy_state_.x = x;
-  const double after = system_.energy(energy_state_);
-  // Round-off of the energy sums and the Newton tolerance's share.
-  const double allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
-  if (after <= before + allowance) return true;
-  ++stats_.energy_guard_rejections;
-  return false;
-}
-
-bool VelocityImplicitEuler::solve_step(double t0, double h, const Eigen::VectorXd& x0,
-                                       const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
-  ++stats_.newton_solves;
-  for (int trial = 1; trial <= kFullNewtonTrial; ++trial) {
-    if (newton(t0, h, x0, guess, trial, x)) {
-      if (caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));
-      return true;
-    }
-    if (!reuse_enabled()) return false;
-  }
-  return false;
-}
-
 bool VelocityImplicitEuler::do_step(double h) {
-  const double t0 = state_.t;
-  const Eigen::VectorXd& x0 = state_.x;
-  if (!estimating_error()) return solve_step(t0, h, x0, x0, &candidate_);
-
-  // The large step is the error estimator's share of the work (as in Drake).
-  const IntegratorStatistics before = stats_;
-  const bool big_ok = solve_step(t0, h, x0, x0, &x_big_);
-  stats_.error_estimator_derivative_evaluations +=
-      stats_.derivative_evaluations - before.derivative_evaluations;
-  stats_.error_estimator_derivative_evaluations_for_jacobian +=
-      stats_.derivative_evaluations_for_jacobian - before.derivative_evaluations_for_jacobian;
-  stats_.error_estimator_jacobian_evaluations +=
-      stats_.jacobian_evaluations - before.jacobian_evaluations;
-  stats_.error_estimator_iteration_matrix_factorizations +=
-      stats_.iteration_matrix_factorizations - before.iteration_matrix_factorizations;
-  stats_.error_estimator_newton_raphson_iterations +=
-      stats_.newton_raphson_iterations - before.newton_raphson_iterations;
-  if (!big_ok) return false;
-
-  x_half_ = 0.5 * (x0 + x_big_);
-  if (!solve_step(t0, 0.5 * h, x0, x_half_, &x_small_)) return false;
-  x_half_.swap(x_small_);
-  if (!solve_step(t0 + 0.5 * h, 0.5 * h, x_half_, x_big_, &candidate_)) return false;
-  // x_big - x_small = (h^2/4) x'' + O(h^3): the local error of the propagated
-  // half-step result, to leading order.
-  error_ = x_big_ - candidate_;
-  return true;
+  if (!estimating_error() && !extrapolating()) {
+    return solve_step(state_.t, h, state_.x, state_.x, &candidate_);
+  }
+  return step_doubling(h);
 }
 
 }  // namespace stiffsim

@@ -24,7 +24,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_json(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 35 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 36 * 8,
                 "IntegratorStatistics changed: update statistics_json()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -50,6 +50,7 @@ json statistics_json(const IntegratorStatistics& s) {
   j["newton_trials"] = s.newton_trials;
   j["line_search_backtracks"] = s.line_search_backtracks;
   j["energy_guard_rejections"] = s.energy_guard_rejections;
+  j["extrapolation_rejections"] = s.extrapolation_rejections;
   j["merit_damping_evaluations"] = s.merit_damping_evaluations;
   j["velocity_map_evaluations"] = s.velocity_map_evaluations;
   j["mass_matrix_assemblies"] = s.mass_matrix_assemblies;

@@ -12,65 +12,10 @@
 #include "stiffsim/integrators/simulator.h"
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
+#include "test_systems.h"
 
 namespace stiffsim {
 namespace {
-
-// One particle of mass m on a spring (k, c) to a pinned anchor, along x, no
-// gravity: m x'' = -k (x - L) - c x'.
-struct SpringDamper {
-  double m = 1.0, k = 100.0, c = 2.0, L = 1.0, x0 = 1.2;
-  std::unique_ptr<ParticleSystem> system() const {
-    ParticleDescription d;
-    d.name = "sd";
-    d.positions = {Eigen::Vector3d::Zero(), Eigen::Vector3d(x0, 0, 0)};
-    d.masses = {1.0, m};
-    d.springs = {Spring{0, 1, L, k, c}};
-    d.pinned = {0};
-    d.gravity.setZero();
-    return std::make_unique<ParticleSystem>(d);
-  }
-  // Underdamped closed form of the displacement u = x - L from u0, u'(0) = 0.
-  double position(double t) const {
-    const double zeta = c / (2 * std::sqrt(k * m)), w0 = std::sqrt(k / m);
-    const double wd = w0 * std::sqrt(1 - zeta * zeta);
-    const double u0 = x0 - L;
-    return L + std::exp(-zeta * w0 * t) *
-                   (u0 * std::cos(wd * t) + u0 * zeta * w0 / wd * std::sin(wd * t));
-  }
-};
-
-IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-10) {
-  IntegratorSettings s;
-  s.fixed_step = true;
-  s.max_step = h;
-  s.error_estimate = estimate;
-  s.accuracy = accuracy;
-  return s;
-}
-
-std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch,
-                                      std::optional<SpringParameters> bend = SpringParameters{
-                                          10.0, 0.05}) {
-  ClothSpec spec;
-  spec.nx = spec.ny = n;
-  spec.total_mass = 0.4;
-  spec.stretch = SpringParameters{k_stretch, 0.5};
-  spec.shear = SpringParameters{100.0, 0.1};
-  spec.bend = bend;
-  return std::make_unique<ParticleSystem>(make_cloth(spec));
-}
-
-double fitted_slope(const std::vector<double>& h, const std::vector<double>& e) {
-  // Least-squares slope of log e against log h.
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  const double n = h.size();
-  for (size_t i = 0; i < h.size(); ++i) {
-    const double x = std::log(h[i]), y = std::log(e[i]);
-    sx += x, sy += y, sxx += x * x, sxy += x * y;
-  }
-  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
-}
 
 TEST(VelocityImplicitEuler, GlobalErrorIsFirstOrderOnSpringDamper) {
   const SpringDamper sd;

@@ -4,6 +4,8 @@
 // linear solver behind the iteration matrix. Subclasses hold only their
 // method.
 
+#include <cmath>
+#include <limits>
 #include <string>
 
 #include "stiffsim/integrators/integrator_base.h"
@@ -22,6 +24,15 @@ enum class NewtonForm {
 NewtonForm parse_newton_form(const std::string& name);  // "mass-matrix" | "generic"
 std::string to_string(NewtonForm form);
 
+// How IE estimates its local error (DESIGN.md section 3).
+enum class ImplicitErrorEstimate {
+  kStepDoubling,  // a full step and two half steps; the half steps are propagated
+  kTrapezoid,     // the implicit trapezoid rule fed by the IE result; IE is propagated
+};
+
+ImplicitErrorEstimate parse_error_estimator(const std::string& name);  // "trapezoid" | "doubling"
+std::string to_string(ImplicitErrorEstimate estimator);
+
 struct ImplicitSettings {
   JacobianScheme jacobian = JacobianScheme::kAnalytic;
   LinearSolverKind linear_solver = LinearSolverKind::kAuto;
@@ -38,6 +49,11 @@ struct ImplicitSettings {
   // In passive scenes (Capabilities::passive) a Newton solution whose energy
   // exceeds the step's initial energy is rejected as a spurious root.
   bool energy_guard = true;
+  // Step-doubling methods propagate 2 x_small - x_big (second order) rather
+  // than x_small; fixed-step mode then also takes the three solves.
+  bool extrapolate = false;
+  // IE only: how the local error is estimated.
+  ImplicitErrorEstimate error_estimator = ImplicitErrorEstimate::kTrapezoid;
 };
 
 class ImplicitIntegrator : public IntegratorBase {
@@ -45,6 +61,8 @@ class ImplicitIntegrator : public IntegratorBase {
   ImplicitIntegrator(const System& system, IntegratorSettings settings, ImplicitSettings implicit);
   IntegratorReport report() const override;
   const ImplicitSettings& implicit_settings() const { return implicit_; }
+  // Local extrapolation of the step-doubling pair: x_e = 2 x_small - x_big.
+  bool extrapolating() const { return implicit_.extrapolate; }
 
  protected:
   enum class Convergence { kConverged, kDiverged, kNotYet };
@@ -56,25 +74,123 @@ class ImplicitIntegrator : public IntegratorBase {
   double newton_tolerance() const { return implicit_.newton_kappa * settings_.accuracy; }
   bool reuse_enabled() const { return implicit_.reuse && !implicit_.full_newton; }
 
+  // Sizes the shared Newton workspaces for `unknowns` Newton unknowns
+  // (nv + nz for VIE, nx for IE); subclasses call it from do_initialize().
+  void initialize_newton(int unknowns);
+
+  // --- The method, as the shared Newton solver sees it. ---
+  // Force Jacobians for a step of size h from (t, x); VIE linearizes at
+  // q + h N(q) v, IE at x itself (h unused). Must end in
+  // compute_force_jacobians().
+  virtual void compute_jacobian(double t, const Eigen::VectorXd& x, double h) = 0;
+  // False when compute_jacobian() ignores h (a failure at h then leaves a
+  // Jacobian that is still fresh for h / 2).
+  virtual bool jacobian_depends_on_step() const = 0;
+  // Forms the iteration matrix of the current solve for step h from the last
+  // Jacobian and factors it (factor_iteration_matrix()).
+  virtual bool form_and_factor(double h) = 0;
+  // Sets the dependent parts of an iterate from its unknowns (VIE: q from v).
+  virtual void complete_iterate(double h, const Eigen::VectorXd& x0, Eigen::VectorXd* x) {
+    (void)h, (void)x0, (void)x;
+  }
+  // Offset of the unknowns in x (VIE: nq, IE: 0).
+  virtual int unknowns_offset() const = 0;
+  // Residual of the step equations at the iterate x (exact, whatever the
+  // iteration matrix lags).
+  virtual void residual(double t, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                        Eigen::VectorXd* r) = 0;
+  // Squared norm the line search decreases.
+  virtual double merit(const Eigen::VectorXd& r) const { return r.squaredNorm(); }
+  // Called once per Newton trial before the first iteration.
+  virtual void begin_newton(double t0, double h, const Eigen::VectorXd& x0) {
+    (void)t0, (void)h, (void)x0;
+  }
+  // An optional potential G whose gradient is the residual (VIE's incremental
+  // potential): when potential_search() is true for a rung, the line search
+  // demands sufficient decrease of G rather than of the merit.
+  virtual bool potential_search(int trial) const {
+    (void)trial;
+    return false;
+  }
+  virtual double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                           double h, bool new_iterate) {
+    (void)t, (void)x0, (void)x, (void)h, (void)new_iterate;
+    return 0.0;
+  }
+  // Round-off level of G near g (differences below it are noise).
+  virtual double potential_roundoff(double g) const { return 1e-11 * std::abs(g); }
+
+  // One implicit solve of a step of size h from (t0, x0) starting at the
+  // guess: the reuse ladder's trials 1-3, then full Newton, each with a
+  // line search. Counts one newton_solves. Result in *x.
+  bool solve_step(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
+                  Eigen::VectorXd* x);
+
+  // The step-doubling step: full step, two half steps from the same
+  // solver; the half steps are propagated (or, when extrapolating,
+  // 2 x_small - x_big), the error is x_big - x_small. The full step's work
+  // counts as the error estimator's (as in Drake).
+  bool step_doubling(double h);
+  // Adds the work done since `before` to the error_estimator_* counters.
+  static void add_estimator_share(const IntegratorStatistics& before, IntegratorStatistics* stats);
+
   // Evaluates dF/dq, dF/dv, ... at (t, x) into jacobians_ by the configured
   // scheme, counting jacobian_evaluations and the derivative evaluations it
   // used.
   void compute_force_jacobians(double t, const Eigen::VectorXd& x);
-  // Chooses, analyzes (once) and factors the iteration matrix; counts
-  // factorizations. Returns false if the matrix is singular.
-  bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric);
+  // Chooses, analyzes (once) and factors the iteration matrix of the current
+  // solve, formed for step h; counts factorizations. Returns false if the
+  // matrix is singular.
+  bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h);
   // dx = A^-1 rhs with the current factorization.
   void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx);
-  bool iteration_matrix_factored() const { return factored_; }
-  void invalidate_factorization() { factored_ = false; }
+  bool iteration_matrix_factored() const { return matrices_[active_].factored; }
+  void invalidate_factorization() {
+    for (auto& m : matrices_) m.factored = false;
+  }
+  // Methods with a second iteration matrix (IE's trapezoid estimate: I - h/2 J
+  // beside I - h J) switch between them; the Jacobian is shared.
+  void use_iteration_matrix(int index) { active_ = index; }
+  int active_iteration_matrix() const { return active_; }
+  // Marks the Jacobian stale, so the ladder's trial 3 recomputes it.
+  void mark_jacobian_stale() { jacobian_step_t_ = std::numeric_limits<double>::quiet_NaN(); }
 
   const ImplicitSettings implicit_;
   ForceJacobians jacobians_;
   bool jacobians_valid_ = false;
+  Eigen::VectorXd x_big_, x_half_, x_small_;
 
  private:
-  LinearSolverChoice solver_;
-  bool factored_ = false;
+  // The refresh ladder: kSkip when the rung would rebuild the matrix that
+  // just failed, kGiveUp at trial 4.
+  enum class Refresh { kProceed, kSkip, kGiveUp };
+  Refresh refresh_matrices(double t, const Eigen::VectorXd& x, double h, int trial);
+  void compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h);
+  bool newton(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
+              int trial, Eigen::VectorXd* x);
+  // False when a converged step gained energy in a passive scene.
+  // `count`: a rejection counts as energy_guard_rejections.
+  bool passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, bool count);
+
+  // Trials 1-3 are the reuse ladder; trial 4 iterates with a fresh Jacobian
+  // at every iterate before the step is given up.
+  static constexpr int kFullNewtonTrial = 4;
+  // Halvings of a Newton step before the iteration counts as diverged.
+  static constexpr int kMaxBacktracks = 8;
+
+  struct IterationMatrix {
+    LinearSolverChoice solver;
+    bool factored = false;
+    double h = 0.0;  // the step it was formed for
+  };
+  IterationMatrix matrices_[2];
+  int active_ = 0;
+  // Step start and h of the Jacobian the ladder last evaluated (NaN after a
+  // full-Newton iterate replaced it).
+  double jacobian_step_t_ = 0.0, jacobian_step_h_ = 0.0;
+  bool guard_energy_ = false;
+  State energy_state_;
+  Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_;
 };
 
 }  // namespace stiffsim

@@ -32,12 +32,14 @@ struct IntegratorStatistics {
   double actual_initial_step_size_taken = kNaN;
 
   // Work counters beyond Drake's.
-  long newton_solves = 0;
+  long newton_solves = 0;              // per step: 1, or 3 with the estimate or extrapolation
   long newton_trials = 0;              // Newton iterations started (ladder rungs that ran)
   long line_search_backtracks = 0;     // halved Newton steps
   long merit_damping_evaluations = 0;  // damping matrices for the line-search merit
-  long energy_guard_rejections = 0;    // converged solves rejected for gaining energy // Newton
-                                       // solves attempted (per step: 1, or 3 with the estimate)
+  long energy_guard_rejections = 0;    // converged solves rejected for gaining energy
+  // Extrapolated steps (vie2, ie2) that would have gained energy in a
+  // passive scene and propagated the half-step result instead.
+  long extrapolation_rejections = 0;
   long velocity_map_evaluations = 0;   // N(q) products and assemblies (0 when N = I)
   long mass_matrix_assemblies = 0;     // 1 for a constant M
   long symbolic_analyses = 0;          // sparse orderings / elimination trees
