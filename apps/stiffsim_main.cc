@@ -57,7 +57,7 @@ struct RunOptions {
   std::string integrator;
   double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
   bool fixed_step = false, error_estimate = false;
-  std::string jacobian, linear_solver, newton_form;
+  std::string jacobian, linear_solver, newton_form, error_estimator;
   bool full_newton = false, no_reuse = false;
   std::string output, stats, vtk;
   std::vector<std::string> sets;
@@ -68,7 +68,7 @@ struct RunOptions {
               *accuracy_option = nullptr, *sample_period_option = nullptr,
               *fixed_step_option = nullptr, *error_estimate_option = nullptr,
               *jacobian_option = nullptr, *linear_solver_option = nullptr,
-              *newton_form_option = nullptr;
+              *newton_form_option = nullptr, *error_estimator_option = nullptr;
 };
 
 void add_run_options(CLI::App* run, RunOptions* o) {
@@ -136,6 +136,13 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "or generic (Drake's I - h J)")
           ->check(CLI::IsMember(newton_form_names()))
           ->group(newton);
+  o->error_estimator_option =
+      run->add_option("--error-estimator", o->error_estimator,
+                      "How ie estimates its local error: trapezoid (the implicit trapezoid rule "
+                      "from the IE result, IE propagated; default) or doubling (two half steps "
+                      "propagated, as vie does)")
+          ->check(CLI::IsMember(error_estimator_names()))
+          ->group(newton);
   run->add_flag("--full-newton", o->full_newton,
                 "Fresh Jacobian and factorization at every Newton iteration")
       ->group(newton);
@@ -190,6 +197,9 @@ void apply_options(const RunOptions& o, SceneConfig* config) {
   }
   if (o.newton_form_option->count() > 0) {
     config->implicit.newton_form = parse_newton_form(o.newton_form);
+  }
+  if (o.error_estimator_option->count() > 0) {
+    config->implicit.error_estimator = parse_error_estimator(o.error_estimator);
   }
   if (o.full_newton) config->implicit.full_newton = true;
   if (o.no_reuse) config->implicit.reuse = false;

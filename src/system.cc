@@ -27,7 +27,18 @@ void System::force_jacobians(double t, const ConstVectorRef& q, const ConstVecto
                              const ConstVectorRef& z, const JacobianRequest& request,
                              ForceJacobians* J) const {
   (void)t, (void)q, (void)v, (void)z, (void)request, (void)J;
-  throw std::logic_error(name() + ": no analytic Jacobians; use a finite-difference scheme");
+  throw std::logic_error(name() +
+                         ": no analytic Jacobians; use a finite-difference scheme (forward or "
+                         "central) or automatic");
+}
+
+void System::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                       const ConstVectorRef& z, const JacobianRequest& request,
+                                       ForceJacobians* J) const {
+  (void)t, (void)q, (void)v, (void)z, (void)request, (void)J;
+  throw std::logic_error(name() +
+                         ": no automatic-differentiation Jacobians; use analytic (if available), "
+                         "forward or central");
 }
 
 ForceJacobians empty_jacobians(const Dimensions& d) {

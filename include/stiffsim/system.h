@@ -23,6 +23,7 @@ struct Capabilities {
   bool diagonal_mass_matrix = false;   // M diagonal: M^-1 is a division
   bool symmetric_jacobians = false;    // dF/dq and dF/dv symmetric (conservative particles)
   bool analytic_jacobians = false;     // force_jacobians() implemented
+  bool automatic_jacobians = false;    // automatic_force_jacobians() implemented
   bool has_quaternions = false;        // q holds unit quaternions: project after each step
   bool has_energy = false;             // energy() defined
   // Every force is conservative (in energy()) or dissipative, so the true
@@ -51,6 +52,11 @@ struct JacobianRequest {
   // matrices: the residual always stays exact, so the converged answer is
   // unchanged.
   bool definite = false;
+  // Include every term, even ones a system drops by default for symmetry (the
+  // particle model's damping force depends on q through the spring direction;
+  // MODELS.md allows dropping it from dF/dq). For checking and for methods
+  // that need the true Jacobian; iteration matrices may do without.
+  bool complete = false;
 };
 
 class System {
@@ -103,6 +109,14 @@ class System {
   virtual void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                const ConstVectorRef& z, const JacobianRequest& request,
                                ForceJacobians* J) const;
+  // The exact Jacobians of forces() and misc_derivatives() by forward-mode
+  // automatic differentiation; only called when
+  // capabilities().automatic_jacobians. The result is complete and exact by
+  // construction (approximated_terms = 0): request.definite and
+  // request.complete do not apply to it.
+  virtual void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                         const ConstVectorRef& z, const JacobianRequest& request,
+                                         ForceJacobians* J) const;
 
   // Total energy (kinetic + potential) where defined, NaN otherwise.
   virtual double energy(const State& s) const {

@@ -75,10 +75,9 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
     double last_dx_norm) {
   if (!std::isfinite(dx_norm)) return Convergence::kDiverged;
   // An update at the level of round-off has converged whatever the rate says.
-  constexpr double kZeroTol = 10 * std::numeric_limits<double>::epsilon();
   bool zero = true;
   for (Eigen::Index i = 0; i < dx.size() && zero; ++i) {
-    zero = std::abs(dx[i]) <= std::max(std::abs(x[i]), 1.0) * kZeroTol;
+    zero = std::abs(dx[i]) <= std::max(std::abs(x[i]), 1.0) * kZeroUpdate;
   }
   if (zero) return Convergence::kConverged;
   // Hairer & Wanner IV.8: theta = |dx_k| / |dx_{k-1}|, eta = theta / (1 - theta).
@@ -86,6 +85,12 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
   // eta) assumes a good predictor; ours starts from x_n, so the first update
   // is the whole step and a stale small eta would accept it unchecked.
   if (iteration == 0) return Convergence::kNotYet;
+  // After a damped step (last_dx_norm infinite) there is no rate either:
+  // theta would read 0 and accept any update. Eta = 1 stands in, so only an
+  // update already below the tolerance converges.
+  if (!std::isfinite(last_dx_norm)) {
+    return dx_norm <= newton_tolerance() ? Convergence::kConverged : Convergence::kNotYet;
+  }
   const double theta = dx_norm / last_dx_norm;
   if (theta >= 1.0) return Convergence::kDiverged;
   const double eta = theta / (1.0 - theta);
@@ -238,6 +243,12 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G
     }
     const bool descend_potential = use_potential && slope < 0.0;
+    // An update at the level of round-off cannot decrease any merit
+    // measurably; it is taken, and the convergence test calls it zero.
+    bool negligible = true;
+    for (int k = 0; k < n && negligible; ++k) {
+      negligible = std::abs(dy_[k]) <= std::max(std::abs((*x)[offset + k]), 1.0) * kZeroUpdate;
+    }
     double alpha = 1.0;
     for (int backtrack = 0;; ++backtrack) {
       x_trial_ = *x;
@@ -246,7 +257,9 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       residual(tf, h, x0, x_trial_, &r_trial_);
       const double trial_merit = merit(r_trial_);
       bool accept = std::isfinite(trial_merit);
-      if (accept && descend_potential) {
+      if (negligible) {
+        // accept as is
+      } else if (accept && descend_potential) {
         const double g_trial = potential(tf, x0, x_trial_, h, false);
         // Near the solution G changes by less than its own round-off; there
         // a G that did not measurably rise and a smaller residual decide.
@@ -269,8 +282,9 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);
     if (alpha < 1.0) {
-      // A damped step says nothing about the rate of the undamped iteration.
-      last_norm = std::numeric_limits<double>::infinity();
+      // A damped step says nothing about the rate of the undamped
+      // iteration: the next full update is measured against the last full
+      // one (or, with none yet, against the tolerance alone).
       continue;
     }
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
@@ -287,7 +301,7 @@ bool ImplicitIntegrator::passes_energy_guard(const Eigen::VectorXd& x0, const Ei
   // Euler step that gains energy has found a spurious root of the step
   // equations (a buckled or inverted configuration of stiff springs reached
   // at a large h): the attempt counts as a failure and the step shrinks.
-  if (!guard_energy_) return true;
+  if (!guard_energy_ || energy_guard_suspended_) return true;
   energy_state_.x = x0;
   const double before = system_.energy(energy_state_);
   energy_state_.x = x;

@@ -92,6 +92,7 @@ void IntegratorBase::accept(double h) {
   state_.x.swap(candidate_);
   state_.t += h;
   dense_valid_ = false;
+  on_accept(h);
   ++stats_.steps_taken;
   if (std::isnan(stats_.actual_initial_step_size_taken)) stats_.actual_initial_step_size_taken = h;
   if (std::isnan(stats_.largest_step_size_taken) || h > stats_.largest_step_size_taken) {
@@ -100,6 +101,13 @@ void IntegratorBase::accept(double h) {
 }
 
 void IntegratorBase::fail_at_minimum(double h, const std::string& why) const {
+  std::ostringstream minimum;
+  minimum.precision(6);
+  minimum << " (minimum " << working_min_step() << " s)";
+  fail_step(h, why, minimum.str());
+}
+
+void IntegratorBase::fail_step(double h, const std::string& why, const std::string& detail) const {
   // Name the entries a user should look at: non-finite ones first, then the
   // largest in magnitude.
   const Eigen::VectorXd& x = candidate_.size() == state_.x.size() ? candidate_ : state_.x;
@@ -115,8 +123,8 @@ void IntegratorBase::fail_at_minimum(double h, const std::string& why) const {
   for (auto& n : system_.misc_names()) names.push_back("z:" + n);
   std::ostringstream msg;
   msg.precision(6);
-  msg << method_name() << ": " << why << " at t = " << state_.t << " s with step h = " << h
-      << " s (minimum " << working_min_step() << " s); largest state entries of the last attempt:";
+  msg << method_name() << ": " << why << " at t = " << state_.t << " s with step h = " << h << " s"
+      << detail << "; largest state entries of the last attempt:";
   for (int k = 0; k < shown; ++k) {
     const int i = order[k];
     msg << (k ? ", " : " ") << (i < static_cast<int>(names.size()) ? names[i] : "x") << " = "
@@ -134,6 +142,14 @@ void IntegratorBase::step_at_most(double t_limit) {
     // Snap to the limit rather than leave a sliver of a step behind.
     double h = h_max < 1.001 * settings_.max_step ? h_max : settings_.max_step;
     while (!try_step(h)) {
+      if (is_explicit()) {
+        // An explicit step cannot fail to converge: a non-finite result is
+        // instability, and halving would only hide that the fixed step the
+        // user asked for is too large.
+        fail_step(h, "state became non-finite",
+                  ": the explicit method is unstable at this step size (the scene is too stiff "
+                  "for it; use vie or ie)");
+      }
       h *= kSubdivision;
       ++stats_.substep_failures;
       ++stats_.step_shrinkages_from_substep_failures;
@@ -164,6 +180,11 @@ void IntegratorBase::step_at_most(double t_limit) {
       ++stats_.substep_failures;
       ++stats_.step_shrinkages_from_substep_failures;
       if (a < working_min_step()) {
+        if (is_explicit()) {
+          fail_at_minimum(a, settings_.throw_on_minimum_step
+                                 ? "state became non-finite"
+                                 : "no step could be taken (the state became non-finite)");
+        }
         if (settings_.throw_on_minimum_step) {
           fail_at_minimum(a,
                           "Newton iteration failed to converge (or the state became "
@@ -250,6 +271,30 @@ void IntegratorBase::evaluate_forces(double t, const Eigen::VectorXd& x, Eigen::
   stats_.derivative_seconds += seconds_since(start);
 }
 
+void IntegratorBase::solve_mass_matrix(double t, const ConstVectorRef& q, const Eigen::VectorXd& F,
+                                       Eigen::VectorXd* a) {
+  const SparseMatrix& M = mass_matrix_at(q);
+  a->resize(dims_.nv);
+  if (caps_.diagonal_mass_matrix) {
+    for (int i = 0; i < dims_.nv; ++i) (*a)[i] = F[i] / M.valuePtr()[i];
+    return;
+  }
+  if (!mass_solver_) {
+    LinearSolverChoice choice = make_linear_solver(LinearSolverKind::kAuto, M, true);
+    mass_solver_ = std::move(choice.solver);
+    mass_solver_->analyze(M);
+    ++stats_.symbolic_analyses;
+  }
+  if (!mass_solver_factored_) {
+    if (!mass_solver_->factorize(M)) {
+      throw IntegrationError(
+          method_name() + ": mass matrix is singular at t = " + std::to_string(t), t, 0.0);
+    }
+    mass_solver_factored_ = true;
+  }
+  mass_solver_->solve(F, a);
+}
+
 void IntegratorBase::evaluate_state_derivative(double t, const Eigen::VectorXd& x,
                                                Eigen::VectorXd* xdot) {
   xdot->resize(dims_.nx());
@@ -262,25 +307,7 @@ void IntegratorBase::evaluate_state_derivative(double t, const Eigen::VectorXd& 
     ++stats_.velocity_map_evaluations;
   }
   evaluate_forces(t, x, &work_F_, &work_zdot_);
-  const SparseMatrix& M = mass_matrix_at(q);
-  if (caps_.diagonal_mass_matrix) {
-    for (int i = 0; i < dims_.nv; ++i) work_vdot_[i] = work_F_[i] / M.valuePtr()[i];
-  } else {
-    if (!mass_solver_) {
-      LinearSolverChoice choice = make_linear_solver(LinearSolverKind::kAuto, M, true);
-      mass_solver_ = std::move(choice.solver);
-      mass_solver_->analyze(M);
-      ++stats_.symbolic_analyses;
-    }
-    if (!mass_solver_factored_) {
-      if (!mass_solver_->factorize(M)) {
-        throw IntegrationError(
-            method_name() + ": mass matrix is singular at t = " + std::to_string(t), t, 0.0);
-      }
-      mass_solver_factored_ = true;
-    }
-    mass_solver_->solve(work_F_, &work_vdot_);
-  }
+  solve_mass_matrix(t, q, work_F_, &work_vdot_);
   xdot->segment(dims_.nq, dims_.nv) = work_vdot_;
   xdot->segment(dims_.nq + dims_.nv, dims_.nz) = work_zdot_;
 }
@@ -305,6 +332,7 @@ void IntegratorBase::interpolate(double t, Eigen::VectorXd* x) {
     *x = previous_.x;
     return;
   }
+  if (do_interpolate(t, x)) return;
   if (!dense_valid_) {
     const long before = stats_.derivative_evaluations;
     evaluate_state_derivative(t0, previous_.x, &dense_f0_);

@@ -1,11 +1,12 @@
 #include "stiffsim/integrators/integrator_factory.h"
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/implicit_euler.h"
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 
 namespace stiffsim {
 
-std::vector<std::string> integrator_names() { return {"vie", "vie2"}; }
+std::vector<std::string> integrator_names() { return {"vie", "vie2", "ie", "ie2"}; }
 
 std::unique_ptr<IntegratorBase> make_integrator(const std::string& name, const System& system,
                                                 const IntegratorSettings& settings,
@@ -18,6 +19,8 @@ std::unique_ptr<IntegratorBase> make_integrator(const std::string& name, const S
   if (name == "vie2") {
     return std::make_unique<VelocityImplicitEuler>(system, settings, extrapolated);
   }
+  if (name == "ie") return std::make_unique<ImplicitEuler>(system, settings, implicit);
+  if (name == "ie2") return std::make_unique<ImplicitEuler>(system, settings, extrapolated);
   std::string known;
   for (const auto& n : integrator_names()) known += (known.empty() ? "" : ", ") + n;
   throw InputError("unknown integrator '" + name + "' (expected one of: " + known + ")");

@@ -28,6 +28,7 @@ std::vector<std::string> linear_solver_names() {
   return {"auto", "dense", "dense-lu", "dense-ldlt", "cholmod", "umfpack"};
 }
 std::vector<std::string> newton_form_names() { return {"mass-matrix", "generic"}; }
+std::vector<std::string> error_estimator_names() { return {"trapezoid", "doubling"}; }
 
 namespace {
 
@@ -81,7 +82,8 @@ std::vector<std::string> simulation_keys() {
           "sample_period",  "min_step",
           "jacobian",       "linear_solver",
           "newton_form",    "full_newton",
-          "reuse",          "definite_iteration_matrix"};
+          "reuse",          "definite_iteration_matrix",
+          "error_estimator"};
 }
 
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ") {
@@ -510,6 +512,10 @@ void read_simulation(const Section& top, SceneConfig* config) {
   }
   if (s.has("newton_form")) {
     implicit.newton_form = parse_newton_form(s.choice_or("newton_form", newton_form_names(), ""));
+  }
+  if (s.has("error_estimator")) {
+    implicit.error_estimator =
+        parse_error_estimator(s.choice_or("error_estimator", error_estimator_names(), ""));
   }
   implicit.full_newton = s.boolean_or("full_newton", implicit.full_newton);
   implicit.reuse = s.boolean_or("reuse", implicit.reuse);

@@ -74,6 +74,7 @@ json integrator_json(const IntegratorReport& r) {
   j["mode"] = r.mode;
   j["error_estimate"] = r.error_estimate;
   j["extrapolated"] = r.extrapolated;
+  if (!r.error_estimator.empty()) j["error_estimator"] = r.error_estimator;
   j["jacobian_scheme"] = r.jacobian_scheme;
   j["newton_form"] = r.newton_form;
   j["linear_solver"] = {{"chosen", r.linear_solver},

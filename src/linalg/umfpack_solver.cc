@@ -25,6 +25,10 @@ std::string umfpack_error(const char* call, int status) {
 
 UmfpackSolver::UmfpackSolver() {
   umfpack_di_defaults(control_);
+  // No iterative refinement: every solve here serves a Newton iteration
+  // whose matrix is an approximation anyway, and each refinement step costs
+  // another solve plus a product with A.
+  control_[UMFPACK_IRSTEP] = 0;
   std::fill(info_, info_ + UMFPACK_INFO, 0.0);
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <unsupported/Eigen/AutoDiff>
 #include <utility>
 
 #include "stiffsim/error.h"
@@ -40,21 +41,57 @@ std::string str(double x) {
   return s.str();
 }
 
+template <typename Scalar>
+using Vector3 = Eigen::Matrix<Scalar, 3, 1>;
+
 // Geometry of one spring at the current positions. A collapsed spring gets
 // u = 0, so both its elastic and damping forces vanish (the direction of
 // k (l - L) u is undefined there), and collapsed = true so the Jacobian can
 // pick a finite value.
+template <typename Scalar>
 struct SpringFrame {
-  Eigen::Vector3d u;
-  double l;
+  Vector3<Scalar> u;
+  Scalar l;
   bool collapsed;
 };
 
-SpringFrame spring_frame(const Eigen::Vector3d& xa, const Eigen::Vector3d& xb) {
-  const Eigen::Vector3d d = xb - xa;
-  const double l = d.norm();
-  if (!(l > kCollapsedLength)) return {Eigen::Vector3d::Zero(), l, true};
+// A value without its derivatives (the identity on doubles).
+inline double constant(double x) { return x; }
+template <typename Derivatives>
+Eigen::AutoDiffScalar<Derivatives> constant(const Eigen::AutoDiffScalar<Derivatives>& x) {
+  return Eigen::AutoDiffScalar<Derivatives>(x.value());
+}
+
+template <typename Scalar>
+SpringFrame<Scalar> spring_frame(const Vector3<Scalar>& xa, const Vector3<Scalar>& xb) {
+  const Vector3<Scalar> d = xb - xa;
+  const Scalar l = d.norm();
+  // The derivative of |d| at d = 0 is NaN, and NaN * (u = 0) would leak into
+  // dual numbers: a collapsed l is a constant.
+  if (!(l > kCollapsedLength)) return {Vector3<Scalar>::Zero(), constant(l), true};
   return {d / l, l, false};
+}
+
+// f_a of MODELS.md, f_b = -f_a, with vab = v_b - v_a. The one definition of
+// the spring force: forces() runs it on doubles, automatic_force_jacobians()
+// on dual numbers, so the two can never disagree.
+template <typename Scalar>
+Vector3<Scalar> spring_force_on_a(const Spring& sp, const Vector3<Scalar>& xa,
+                                  const Vector3<Scalar>& xb, const Vector3<Scalar>& vab) {
+  const SpringFrame<Scalar> f = spring_frame(xa, xb);
+  return (sp.k * (f.l - sp.rest_length) + sp.c * vab.dot(f.u)) * f.u;
+}
+
+// Derivative lanes of one spring: positions and velocities of its two nodes.
+// Fixed size, so the dual numbers live on the stack and the automatic
+// Jacobian costs O(springs), never O(springs * dofs).
+enum Lane { kXa = 0, kXb = 3, kVa = 6, kVb = 9, kLanes = 12 };
+using SpringDual = Eigen::AutoDiffScalar<Eigen::Matrix<double, kLanes, 1>>;
+
+Vector3<SpringDual> seeded(const Eigen::Vector3d& value, int first_lane) {
+  Vector3<SpringDual> x;
+  for (int i = 0; i < 3; ++i) x[i] = SpringDual(value[i], kLanes, first_lane + i);
+  return x;
 }
 
 }  // namespace
@@ -182,6 +219,7 @@ Capabilities ParticleSystem::capabilities() const {
   c.diagonal_mass_matrix = true;
   c.symmetric_jacobians = true;
   c.analytic_jacobians = true;
+  c.automatic_jacobians = true;
   c.has_energy = true;
   c.passive = true;  // springs and gravity conserve, dampers and drag dissipate
   return c;
@@ -240,8 +278,7 @@ void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVector
     Eigen::Vector3d vab = Eigen::Vector3d::Zero();
     if (db >= 0) vab += v.segment<3>(db);
     if (da >= 0) vab -= v.segment<3>(da);
-    const SpringFrame f = spring_frame(xa, xb);
-    const Eigen::Vector3d fa = (sp.k * (f.l - sp.rest_length) + sp.c * vab.dot(f.u)) * f.u;
+    const Eigen::Vector3d fa = spring_force_on_a(sp, xa, xb, vab);
     if (da >= 0) F.segment<3>(da) += fa;
     if (db >= 0) F.segment<3>(db) -= fa;
   }
@@ -249,15 +286,19 @@ void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVector
 
 const ForceJacobians& ParticleSystem::jacobian_pattern() const { return jacobian_pattern_; }
 
+void ParticleSystem::check_jacobian_pattern(const ForceJacobians& J, const char* caller) const {
+  const SparseMatrix& P = jacobian_pattern_.dF_dq;
+  if (J.dF_dq.nonZeros() != P.nonZeros() || J.dF_dv.nonZeros() != P.nonZeros() ||
+      J.dF_dq.rows() != P.rows() || J.dF_dv.rows() != P.rows()) {
+    throw std::logic_error(name() + ": " + caller + "() needs matrices with jacobian_pattern()");
+  }
+}
+
 void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                      const ConstVectorRef& z, const JacobianRequest& request,
                                      ForceJacobians* J) const {
-  (void)t, (void)v, (void)z;
-  const SparseMatrix& P = jacobian_pattern_.dF_dq;
-  if (J->dF_dq.nonZeros() != P.nonZeros() || J->dF_dv.nonZeros() != P.nonZeros() ||
-      J->dF_dq.rows() != P.rows() || J->dF_dv.rows() != P.rows()) {
-    throw std::logic_error(name() + ": force_jacobians() needs matrices with jacobian_pattern()");
-  }
+  (void)t, (void)z;
+  check_jacobian_pattern(*J, "force_jacobians");
   set_zero_keep_pattern(&J->dF_dq);
   set_zero_keep_pattern(&J->dF_dv);
   double* K = J->dF_dq.valuePtr();
@@ -273,12 +314,12 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
     if (da < 0 && db < 0) continue;
     const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
     const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
-    const SpringFrame f = spring_frame(xa, xb);
+    const SpringFrame<double> f = spring_frame(xa, xb);
 
     // S = df_a/dx_b. The damping force c ((v_b - v_a).u) u also depends on x
-    // through u; that derivative is dropped here (MODELS.md allows it: it only
-    // slows Newton down, the residual stays exact), which is also what keeps K
-    // symmetric.
+    // through u; unless the request is complete that derivative is dropped
+    // (MODELS.md allows it: it only slows Newton down, the residual stays
+    // exact), which is also what keeps K symmetric.
     Eigen::Matrix3d S;
     if (f.collapsed) {
       // Direction undefined. k I is the exact Jacobian of a zero-rest-length
@@ -297,6 +338,15 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
       }
       const Eigen::Matrix3d uut = f.u * f.u.transpose();
       S = sp.k * (transverse * (Eigen::Matrix3d::Identity() - uut) + uut);
+      if (request.complete && sp.c != 0.0) {
+        // d/dd [c (w.u) u] with w = v_b - v_a and du/dd = P / l,
+        // P = I - u u^T: c (u (P w)^T + (w.u) P) / l. Unsymmetric.
+        Eigen::Vector3d w = Eigen::Vector3d::Zero();
+        if (db >= 0) w += v.segment<3>(db);
+        if (da >= 0) w -= v.segment<3>(da);
+        const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - uut;
+        S += (sp.c / f.l) * (f.u * (P * w).transpose() + w.dot(f.u) * P);
+      }
     }
     const Eigen::Matrix3d C = sp.c * f.u * f.u.transpose();
 
@@ -306,13 +356,67 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
       if (bs[0] < 0) continue;  // block touches a pinned node
       const double sign = kBlockSign[blk];
       for (int e = 0; e < 9; ++e) {
-        // Slots are column-major within the block; S and C are symmetric.
+        // Slots are column-major within the block. Every block is +-df_a/dx_b
+        // (f_b = -f_a, and f_a depends on x_b - x_a only), so the same
+        // (row, col) of S serves all four even when S is unsymmetric.
         K[bs[e]] += sign * S(e % 3, e / 3);
         D[bs[e]] += sign * C(e % 3, e / 3);
       }
     }
   }
   J->approximated_terms = approximated;
+}
+
+void ParticleSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
+                                               const ConstVectorRef& v, const ConstVectorRef& z,
+                                               const JacobianRequest& request,
+                                               ForceJacobians* J) const {
+  (void)t, (void)z, (void)request;  // exact and complete whatever the request
+  check_jacobian_pattern(*J, "automatic_force_jacobians");
+  set_zero_keep_pattern(&J->dF_dq);
+  set_zero_keep_pattern(&J->dF_dv);
+  double* K = J->dF_dq.valuePtr();
+  double* D = J->dF_dv.valuePtr();
+
+  // Gravity is constant and drag linear: their derivatives are known exactly
+  // without dual numbers (as in force_jacobians()).
+  for (size_t i = 0; i < diagonal_slots_.size(); ++i)
+    D[diagonal_slots_[i]] = -desc_.drag * free_mass_[i];
+
+  for (size_t s = 0; s < desc_.springs.size(); ++s) {
+    const Spring& sp = desc_.springs[s];
+    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
+    if (da < 0 && db < 0) continue;
+    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
+    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
+    // Pinned nodes have zero velocity; their lanes are seeded anyway (uniform
+    // code) and simply never scattered, as their slots are -1.
+    const Eigen::Vector3d va =
+        da >= 0 ? Eigen::Vector3d(v.segment<3>(da)) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d vb =
+        db >= 0 ? Eigen::Vector3d(v.segment<3>(db)) : Eigen::Vector3d::Zero();
+    const Vector3<SpringDual> vab = seeded(vb, kVb) - seeded(va, kVa);
+    const Vector3<SpringDual> fa =
+        spring_force_on_a<SpringDual>(sp, seeded(xa, kXa), seeded(xb, kXb), vab);
+
+    const std::array<int, 36>& slots = spring_slots_[s];
+    for (int blk = 0; blk < 4; ++blk) {
+      const int* bs = &slots[9 * blk];
+      if (bs[0] < 0) continue;
+      // Rows of node a take +df_a, rows of node b take df_b = -df_a; columns
+      // of node a read the a lanes, columns of node b the b lanes.
+      const double sign = (blk == kAA || blk == kAB) ? 1.0 : -1.0;
+      const bool column_b = blk == kAB || blk == kBB;
+      const int x_lane = column_b ? kXb : kXa;
+      const int v_lane = column_b ? kVb : kVa;
+      for (int e = 0; e < 9; ++e) {
+        const auto& derivatives = fa[e % 3].derivatives();
+        K[bs[e]] += sign * derivatives[x_lane + e / 3];
+        D[bs[e]] += sign * derivatives[v_lane + e / 3];
+      }
+    }
+  }
+  J->approximated_terms = 0;
 }
 
 double ParticleSystem::energy(const State& s) const {

@@ -49,11 +49,22 @@ struct Jacobians {
 };
 
 Jacobians jacobians_at(const ParticleSystem& sys, const VectorXd& q, const VectorXd& v,
-                       bool definite = false) {
+                       bool definite = false, bool complete = false) {
   ForceJacobians J = sys.jacobian_pattern();
   JacobianRequest request;
   request.definite = definite;
+  request.complete = complete;
   sys.force_jacobians(0.0, q, v, VectorXd(), request, &J);
+  return {MatrixXd(J.dF_dq), MatrixXd(J.dF_dv), J.approximated_terms};
+}
+
+Jacobians automatic_jacobians_at(const ParticleSystem& sys, const VectorXd& q, const VectorXd& v,
+                                 bool definite = false) {
+  ForceJacobians J = sys.jacobian_pattern();
+  J.approximated_terms = -1;
+  JacobianRequest request;
+  request.definite = definite;
+  sys.automatic_force_jacobians(0.0, q, v, VectorXd(), request, &J);
   return {MatrixXd(J.dF_dq), MatrixXd(J.dF_dv), J.approximated_terms};
 }
 
@@ -160,6 +171,7 @@ TEST(ParticleSystem, CapabilitiesDescribeAConservativeParticleSystem) {
   EXPECT_TRUE(c.diagonal_mass_matrix);
   EXPECT_TRUE(c.symmetric_jacobians);
   EXPECT_TRUE(c.analytic_jacobians);
+  EXPECT_TRUE(c.automatic_jacobians);
   EXPECT_TRUE(c.has_energy);
   EXPECT_FALSE(c.has_quaternions);
 }
@@ -330,6 +342,63 @@ TEST(ParticleSystem, DampingJacobianIsExactAtAnyVelocity) {
   EXPECT_GT(relative_error(J.K, central_difference(sys, s.q(d), s.v(d), false)), 1e-6);
 }
 
+TEST(ParticleSystem, CompleteJacobianMatchesDifferencesAtAnyVelocity) {
+  // With request.complete, K keeps the damping term through u(x): exact at
+  // v != 0 with dampers and drag, and unsymmetric there.
+  for (const ParticleSystem& sys :
+       {ParticleSystem(make_cloth(small_cloth(2.0))), ParticleSystem(make_rope(small_rope(1.0)))}) {
+    const State s = perturbed_state(sys, 0.05, 21);
+    const Dimensions d = sys.dimensions();
+    const Jacobians J = jacobians_at(sys, s.q(d), s.v(d), false, true);
+    EXPECT_LT(relative_error(J.K, central_difference(sys, s.q(d), s.v(d), false)), 1e-6);
+    EXPECT_LT(relative_error(J.D, central_difference(sys, s.q(d), s.v(d), true)), 1e-8);
+    EXPECT_FALSE(J.K.isApprox(J.K.transpose(), 1e-6));
+    // D does not depend on the request.
+    EXPECT_EQ(J.D, jacobians_at(sys, s.q(d), s.v(d)).D);
+  }
+}
+
+TEST(ParticleSystem, AutomaticJacobiansEqualTheCompleteAnalyticOnes) {
+  // The same derivative taken twice (by hand and by dual numbers through the
+  // force kernel): equal to round-off, pinned nodes, drag and all.
+  for (const ParticleSystem& sys :
+       {ParticleSystem(make_cloth(small_cloth(2.0))), ParticleSystem(make_rope(small_rope(1.0)))}) {
+    for (unsigned seed : {22u, 23u}) {
+      const State s = perturbed_state(sys, 0.05, seed);
+      const Dimensions d = sys.dimensions();
+      const Jacobians analytic = jacobians_at(sys, s.q(d), s.v(d), false, true);
+      const Jacobians automatic = automatic_jacobians_at(sys, s.q(d), s.v(d));
+      EXPECT_LT(relative_error(automatic.K, analytic.K), 1e-14);
+      EXPECT_LT(relative_error(automatic.D, analytic.D), 1e-14);
+      EXPECT_EQ(automatic.approximated, 0);
+    }
+  }
+}
+
+TEST(ParticleSystem, AutomaticJacobiansIgnoreTheDefiniteRequest) {
+  const ParticleSystem sys(make_cloth(small_cloth(0.0)));
+  const Dimensions d = sys.dimensions();
+  State s = perturbed_state(sys, 0.02, 24);
+  s.q(d) *= 0.6;  // every spring compressed: the definite request would clamp
+  const Jacobians exact = jacobians_at(sys, s.q(d), s.v(d), false, true);
+  const Jacobians automatic = automatic_jacobians_at(sys, s.q(d), s.v(d), true);
+  ASSERT_GT(jacobians_at(sys, s.q(d), s.v(d), true).approximated, 0);
+  EXPECT_LT(relative_error(automatic.K, exact.K), 1e-14);
+  EXPECT_EQ(automatic.approximated, 0);
+}
+
+TEST(ParticleSystem, AutomaticJacobianOfACollapsedSpringIsFinite) {
+  // forces() defines a collapsed spring's force as 0, and AD differentiates
+  // forces() as it is: finite, where a naive |d| would give NaN lanes.
+  ParticleDescription d = pendulum(10.0, 1.0, 0.5);
+  d.positions[1] = d.positions[0];
+  const ParticleSystem sys(d);
+  const VectorXd q = sys.initial_state().q(sys.dimensions());
+  const Jacobians automatic = automatic_jacobians_at(sys, q, VectorXd::Ones(3));
+  EXPECT_TRUE(automatic.K.allFinite());
+  EXPECT_TRUE(automatic.D.allFinite());
+}
+
 TEST(ParticleSystem, ForceJacobiansOverwriteInsteadOfAccumulating) {
   const ParticleSystem sys(make_cloth(small_cloth(1.0)));
   const State s = perturbed_state(sys, 0.05, 8);
@@ -390,6 +459,8 @@ TEST(ParticleSystem, ForcesAndJacobiansDoNotAllocate) {
   g_count_allocations = true;
   sys.forces(0.0, s.q(d), s.v(d), s.z(d), F);
   sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), request, &J);
+  sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), JacobianRequest{false, true}, &J);
+  sys.automatic_force_jacobians(0.0, s.q(d), s.v(d), s.z(d), request, &J);
   sys.mass_matrix(s.q(d), &M);
   g_count_allocations = false;
   EXPECT_EQ(g_allocations.load(), 0);

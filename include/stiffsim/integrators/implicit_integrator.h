@@ -152,10 +152,13 @@ class ImplicitIntegrator : public IntegratorBase {
   // beside I - h J) switch between them; the Jacobian is shared.
   void use_iteration_matrix(int index) { active_ = index; }
   int active_iteration_matrix() const { return active_; }
+  // While suspended, converged solves skip the energy guard (a solve whose
+  // result is only compared, never propagated).
+  void suspend_energy_guard(bool suspended) { energy_guard_suspended_ = suspended; }
   // Marks the Jacobian stale, so the ladder's trial 3 recomputes it.
   void mark_jacobian_stale() { jacobian_step_t_ = std::numeric_limits<double>::quiet_NaN(); }
 
-  const ImplicitSettings implicit_;
+  ImplicitSettings implicit_;
   ForceJacobians jacobians_;
   bool jacobians_valid_ = false;
   Eigen::VectorXd x_big_, x_half_, x_small_;
@@ -172,6 +175,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // `count`: a rejection counts as energy_guard_rejections.
   bool passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, bool count);
 
+  // Relative size of an update at the level of round-off (Drake's
+  // IsUpdateZero tolerance).
+  static constexpr double kZeroUpdate = 10 * std::numeric_limits<double>::epsilon();
   // Trials 1-3 are the reuse ladder; trial 4 iterates with a fresh Jacobian
   // at every iterate before the step is given up.
   static constexpr int kFullNewtonTrial = 4;
@@ -189,6 +195,7 @@ class ImplicitIntegrator : public IntegratorBase {
   // full-Newton iterate replaced it).
   double jacobian_step_t_ = 0.0, jacobian_step_h_ = 0.0;
   bool guard_energy_ = false;
+  bool energy_guard_suspended_ = false;
   State energy_state_;
   Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_;
 };

@@ -41,13 +41,18 @@ class IntegratorBase {
   virtual bool supports_error_estimation() const = 0;
   // Order of the local error estimate (2 for VIE: error of O(h^2)).
   virtual int error_estimate_order() const = 0;
+  // Explicit methods have no convergence failure to recover from by halving
+  // the step: a non-finite fixed step means the method is unstable there, so
+  // it throws at once instead of halving down to the minimum step.
+  virtual bool is_explicit() const { return false; }
 
   // Sets the state, resets the statistics and the per-run workspaces.
   void initialize(const State& initial);
 
   // Takes one step that ends no later than t_limit (fixed or error-controlled
   // according to the settings). Throws IntegrationError when no step can be
-  // taken (Newton divergence or non-finite state at the minimum step).
+  // taken (Newton divergence or non-finite state at the minimum step; for an
+  // explicit method in fixed-step mode, the first non-finite step).
   void step_at_most(double t_limit);
   // Steps until t reaches t_final exactly.
   void integrate_to(double t_final);
@@ -55,9 +60,10 @@ class IntegratorBase {
   const State& state() const { return state_; }
   double previous_time() const { return previous_.t; }
   const State& previous_state() const { return previous_; }
-  // Cubic Hermite interpolation over the last step [previous_time(), t]. The
-  // endpoint derivatives are evaluated lazily (once per step, counted in
-  // statistics().dense_output_evaluations).
+  // Dense output over the last step [previous_time(), t]: the method's own
+  // interpolant where it has one (do_interpolate), cubic Hermite otherwise.
+  // The Hermite endpoint derivatives are evaluated lazily (once per step,
+  // counted in statistics().dense_output_evaluations).
   void interpolate(double t, Eigen::VectorXd* x);
 
   const IntegratorStatistics& statistics() const { return stats_; }
@@ -76,6 +82,17 @@ class IntegratorBase {
   virtual bool do_step(double h) = 0;
   // Called once by initialize() after the base is reset.
   virtual void do_initialize() {}
+  // Called when the attempt of size h that do_step() just made is accepted
+  // (state() already holds its result). Attempts that are rejected never get
+  // here, so a method keeps per-step data (e.g. dense-output stages) from
+  // the accepted step only.
+  virtual void on_accept(double h) { (void)h; }
+  // The method's own interpolant at t strictly inside the last accepted
+  // step, into *x; false falls back to cubic Hermite.
+  virtual bool do_interpolate(double t, Eigen::VectorXd* x) {
+    (void)t, (void)x;
+    return false;
+  }
 
   // x_dot = (N(q) v, M^-1 F, f_z) at (t, x), counted as one derivative
   // evaluation (statistics().derivative_evaluations).
@@ -88,6 +105,11 @@ class IntegratorBase {
                        Eigen::VectorXd* zdot);
   // Assembles M(q) into mass_matrix_ unless M is constant and already there.
   const SparseMatrix& mass_matrix_at(const ConstVectorRef& q);
+  // Solves M(q) a = F (a division for a diagonal M, otherwise a factorization
+  // kept until M changes). t only names the time if M is singular. a may not
+  // alias F.
+  void solve_mass_matrix(double t, const ConstVectorRef& q, const Eigen::VectorXd& F,
+                         Eigen::VectorXd* a);
 
   const System& system_;
   const IntegratorSettings settings_;
@@ -104,6 +126,9 @@ class IntegratorBase {
   void accept(double h);
   double working_min_step() const;
   [[noreturn]] void fail_at_minimum(double h, const std::string& why) const;
+  // Throws IntegrationError "<method>: <why> at t = .. s with step h = .. s
+  // <detail>; largest state entries of the last attempt: ...".
+  [[noreturn]] void fail_step(double h, const std::string& why, const std::string& detail) const;
 
   SparseMatrix mass_matrix_;
   bool mass_matrix_valid_ = false;

@@ -62,6 +62,7 @@ struct IntegratorReport {
   std::string method;           // "vie", ...
   std::string mode;             // "fixed-step" or "error-controlled"
   bool error_estimate = false;  // whether the estimate was computed
+  std::string error_estimator;  // how, where a method has a choice
   bool extrapolated = false;
   std::string jacobian_scheme;         // empty for explicit methods
   std::string newton_form;             // "mass-matrix" or "generic"

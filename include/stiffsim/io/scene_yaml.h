@@ -48,10 +48,11 @@ SceneConfig parse_scene(const std::string& text, const std::string& source_name,
                         const std::vector<std::string>& overrides = {});
 
 // The spellings the scene schema and the CLI accept for the implicit options
-// (parse_jacobian_scheme, parse_linear_solver_kind and parse_newton_form take
-// them), kept in one place so both stay in step.
+// (parse_jacobian_scheme, parse_linear_solver_kind, parse_newton_form and
+// parse_error_estimator take them), kept in one place so both stay in step.
 std::vector<std::string> jacobian_scheme_names();
 std::vector<std::string> linear_solver_names();
 std::vector<std::string> newton_form_names();
+std::vector<std::string> error_estimator_names();
 
 }  // namespace stiffsim

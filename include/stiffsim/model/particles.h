@@ -1,7 +1,8 @@
 #pragma once
 // Particle mass-spring systems exactly as MODELS.md defines them: lumped
 // masses, linear springs with dampers along the spring axis, pins, gravity and
-// drag. N(q) = I, M constant and diagonal, analytic symmetric K and D.
+// drag. N(q) = I, M constant and diagonal, analytic symmetric K and D (and
+// complete, unsymmetric ones on request or by automatic differentiation).
 
 #include <Eigen/Core>
 #include <array>
@@ -49,13 +50,22 @@ class ParticleSystem : public System {
   void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
               VectorRef F) const override;
   const ForceJacobians& jacobian_pattern() const override;
-  // dF/dv keeps only c u u^T: the derivative of the damping force through
-  // u(x) is dropped from dF/dq (MODELS.md allows it; it changes the Newton
-  // rate, never the solution). With request.definite the transverse factor
-  // (1 - L/l) is clamped at 0 and approximated_terms counts the springs.
+  // By default the derivative of the damping force through u(x) is dropped
+  // from dF/dq (MODELS.md allows it; it changes the Newton rate, never the
+  // solution), which keeps K symmetric; request.complete adds it (K is then
+  // unsymmetric wherever springs move). With request.definite the transverse
+  // factor (1 - L/l) is clamped at 0 and approximated_terms counts the springs.
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
+  // The complete Jacobians by forward-mode AD of the same spring kernel that
+  // forces() runs, one spring at a time with 12 derivative lanes (positions
+  // and velocities of its two nodes): O(springs). Differentiates forces() as
+  // it is, so a collapsed spring (force 0 by definition) contributes 0 where
+  // force_jacobians() substitutes k I.
+  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                 const ConstVectorRef& z, const JacobianRequest& request,
+                                 ForceJacobians* J) const override;
   // Kinetic + gravitational + spring potential energy.
   double energy(const State& s) const override;
 
@@ -65,6 +75,9 @@ class ParticleSystem : public System {
   int dof_of_node(int node) const { return dof_of_node_[node]; }
 
  private:
+  // Throws std::logic_error unless J has the sizes of jacobian_pattern().
+  void check_jacobian_pattern(const ForceJacobians& J, const char* caller) const;
+
   ParticleDescription desc_;
   std::vector<int> dof_of_node_;  // 3*free index or -1
   int free_nodes_ = 0;
