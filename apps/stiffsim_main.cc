@@ -87,7 +87,10 @@ void add_run_options(CLI::App* run, RunOptions* o) {
 
   const std::string simulation = "Simulation (each overrides the scene's simulation block)";
   o->integrator_option = run->add_option("--integrator", o->integrator,
-                                         "Integration method: " + join(integrator_names(), ", "))
+                                         "Integration method: vie (velocity-implicit Euler, "
+                                         "default), vie2 (vie extrapolated, second order), ie "
+                                         "(full-state implicit Euler), ie2 (ie extrapolated), "
+                                         "semi-explicit-euler (fixed step), rk3, rk45")
                              ->check(CLI::IsMember(integrator_names()))
                              ->group(simulation);
   o->t_final_option = run->add_option("--t-final", o->t_final, "End time of the run, s")
@@ -120,8 +123,9 @@ void add_run_options(CLI::App* run, RunOptions* o) {
 
   const std::string newton = "Implicit integrators (override the scene)";
   o->jacobian_option = run->add_option("--jacobian", o->jacobian,
-                                       "Force Jacobians: " + join(jacobian_scheme_names(), ", ") +
-                                           " (only analytic is available so far)")
+                                       "Force Jacobians of the implicit methods: analytic "
+                                       "(default), forward or central (coloured finite "
+                                       "differences), automatic (forward-mode AD per element)")
                            ->check(CLI::IsMember(jacobian_scheme_names()))
                            ->group(newton);
   o->linear_solver_option =

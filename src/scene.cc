@@ -39,7 +39,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
   if (components_.empty()) throw InputError(name_ + ": a scene needs at least one component");
   caps_.identity_velocity_map = caps_.constant_mass_matrix = caps_.diagonal_mass_matrix = true;
   caps_.symmetric_jacobians = caps_.analytic_jacobians = caps_.has_energy = true;
-  caps_.passive = true;
+  caps_.automatic_jacobians = caps_.passive = true;
   for (const auto& c : components_) {
     offsets_.push_back(dims_);
     const Dimensions d = c->dimensions();
@@ -52,6 +52,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
     caps_.diagonal_mass_matrix &= k.diagonal_mass_matrix;
     caps_.symmetric_jacobians &= k.symmetric_jacobians;
     caps_.analytic_jacobians &= k.analytic_jacobians;
+    caps_.automatic_jacobians &= k.automatic_jacobians;
     caps_.has_energy &= k.has_energy;
     caps_.passive &= k.passive;
     caps_.has_quaternions |= k.has_quaternions;
@@ -229,7 +230,21 @@ void Scene::misc_derivatives(double t, const ConstVectorRef& q, const ConstVecto
 void Scene::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                             const ConstVectorRef& z, const JacobianRequest& request,
                             ForceJacobians* J) const {
-  if (components_.size() == 1) return components_[0]->force_jacobians(t, q, v, z, request, J);
+  gather_jacobians(t, q, v, z, request, J, &System::force_jacobians);
+}
+
+void Scene::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                      const ConstVectorRef& z, const JacobianRequest& request,
+                                      ForceJacobians* J) const {
+  gather_jacobians(t, q, v, z, request, J, &System::automatic_force_jacobians);
+}
+
+void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                             const ConstVectorRef& z, const JacobianRequest& request,
+                             ForceJacobians* J, JacobianMethod method) const {
+  if (components_.size() == 1) {
+    return ((*components_[0]).*method)(t, q, v, z, request, J);
+  }
   for (SparseMatrix* m : {&J->dF_dq, &J->dF_dv, &J->dF_dz, &J->dfz_dq, &J->dfz_dv, &J->dfz_dz}) {
     set_zero_keep_pattern(m);
   }
@@ -238,8 +253,8 @@ void Scene::force_jacobians(double t, const ConstVectorRef& q, const ConstVector
     const Dimensions d = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
     ForceJacobians& c = scratch_J_[i];
-    components_[i]->force_jacobians(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                                    z.segment(o.nz, d.nz), request, &c);
+    ((*components_[i]).*method)(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
+                                z.segment(o.nz, d.nz), request, &c);
     const Slots& s = slots_[i];
     scatter_add(c.dF_dq, s.dF_dq, 1.0, &J->dF_dq);
     scatter_add(c.dF_dv, s.dF_dv, 1.0, &J->dF_dv);

@@ -40,6 +40,9 @@ class Scene : public System {
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
+  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                 const ConstVectorRef& z, const JacobianRequest& request,
+                                 ForceJacobians* J) const override;
   double energy(const State& s) const override;
 
   int component_count() const { return static_cast<int>(components_.size()); }
@@ -48,6 +51,13 @@ class Scene : public System {
   const Dimensions& offsets(int i) const { return offsets_[i]; }
 
  private:
+  using JacobianMethod = void (System::*)(double, const ConstVectorRef&, const ConstVectorRef&,
+                                          const ConstVectorRef&, const JacobianRequest&,
+                                          ForceJacobians*) const;
+  // Each component's Jacobians by `method`, scattered into J.
+  void gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                        const ConstVectorRef& z, const JacobianRequest& request, ForceJacobians* J,
+                        JacobianMethod method) const;
   std::string name_;
   std::vector<std::unique_ptr<System>> components_;
   std::vector<Dimensions> offsets_;

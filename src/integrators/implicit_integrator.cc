@@ -53,19 +53,14 @@ std::string to_string(ImplicitErrorEstimate estimator) {
 
 ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings settings,
                                        ImplicitSettings implicit)
-    : IntegratorBase(system, settings), implicit_(implicit) {
+    : IntegratorBase(system, settings),
+      implicit_(implicit),
+      jacobian_evaluator_(system, implicit.jacobian) {
   if (implicit_.max_newton_iterations < 1) {
     throw InputError("max_newton_iterations must be at least 1");
   }
   if (!(implicit_.newton_kappa > 0.0 && implicit_.newton_kappa < 1.0)) {
     throw InputError("newton_kappa must be in (0, 1)");
-  }
-  if (implicit_.jacobian == JacobianScheme::kAnalytic && !caps_.analytic_jacobians) {
-    throw InputError(system.name() + " has no analytic Jacobians: choose forward or central");
-  }
-  if (implicit_.jacobian != JacobianScheme::kAnalytic) {
-    throw InputError("Jacobian scheme '" + to_string(implicit_.jacobian) +
-                     "' is not available yet; use analytic");
   }
   jacobians_ = system.jacobian_pattern();
 }
@@ -102,8 +97,11 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   const auto start = WallClock::now();
   JacobianRequest request;
   request.definite = implicit_.definite_iteration_matrix;
-  system_.force_jacobians(t, x.segment(0, dims_.nq), x.segment(dims_.nq, dims_.nv),
-                          x.segment(dims_.nq + dims_.nv, dims_.nz), request, &jacobians_);
+  // Differences count their evaluations of (F, f_z) as derivative
+  // evaluations too, as Drake does.
+  const int evaluations = jacobian_evaluator_.evaluate(t, x, request, &jacobians_);
+  stats_.derivative_evaluations += evaluations;
+  stats_.derivative_evaluations_for_jacobian += evaluations;
   ++stats_.jacobian_evaluations;
   stats_.jacobian_approximated_terms += jacobians_.approximated_terms;
   stats_.jacobian_seconds += seconds_since(start);
@@ -383,6 +381,7 @@ bool ImplicitIntegrator::step_doubling(double h) {
 IntegratorReport ImplicitIntegrator::report() const {
   IntegratorReport r = IntegratorBase::report();
   r.jacobian_scheme = to_string(implicit_.jacobian);
+  r.jacobian_colours = jacobian_evaluator_.colours();
   r.newton_form = to_string(implicit_.newton_form);
   r.extrapolated = implicit_.extrapolate;
   const LinearSolverChoice& solver = matrices_[0].solver;

@@ -21,6 +21,8 @@ constexpr double kHysteresisLow = 0.9;
 constexpr double kHysteresisHigh = 1.2;
 // A convergence failure halves the step.
 constexpr double kSubdivision = 0.5;
+// Growth of max |x| in one fixed explicit step taken as a blow-up.
+constexpr double kBlowUpGrowth = 1e3;
 
 }  // namespace
 
@@ -154,6 +156,22 @@ void IntegratorBase::step_at_most(double t_limit) {
       ++stats_.substep_failures;
       ++stats_.step_shrinkages_from_substep_failures;
       if (h < working_min_step()) fail_at_minimum(h, "Newton iteration failed to converge");
+    }
+    if (is_explicit()) {
+      // Instability shows long before the state overflows: each step
+      // multiplies it by the amplification factor of the fastest mode. A
+      // resolved motion never grows the state a thousandfold in one step, so
+      // such a step stops the run before garbage reaches the trajectory.
+      const double before = std::max(state_.x.lpNorm<Eigen::Infinity>(), 1.0);
+      const double after = candidate_.lpNorm<Eigen::Infinity>();
+      if (after > kBlowUpGrowth * before) {
+        std::ostringstream growth;
+        growth.precision(3);
+        growth << "state grew by a factor of " << after / before << " in one step";
+        fail_step(h, growth.str(),
+                  ": the explicit method is unstable at this step size (the scene is too stiff "
+                  "for it; use vie or ie)");
+      }
     }
     accept(h);
     if (h == h_max) state_.t = t_limit;

@@ -2,11 +2,14 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/implicit_euler.h"
+#include "stiffsim/integrators/runge_kutta3.h"
+#include "stiffsim/integrators/runge_kutta45.h"
+#include "stiffsim/integrators/semi_explicit_euler.h"
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 
 namespace stiffsim {
 
-std::vector<std::string> integrator_names() { return {"vie", "vie2", "ie", "ie2"}; }
+std::vector<std::string> integrator_names() { return {"vie", "vie2", "ie", "ie2", "semi-explicit-euler", "rk3", "rk45"}; }
 
 std::unique_ptr<IntegratorBase> make_integrator(const std::string& name, const System& system,
                                                 const IntegratorSettings& settings,
@@ -21,6 +24,9 @@ std::unique_ptr<IntegratorBase> make_integrator(const std::string& name, const S
   }
   if (name == "ie") return std::make_unique<ImplicitEuler>(system, settings, implicit);
   if (name == "ie2") return std::make_unique<ImplicitEuler>(system, settings, extrapolated);
+  if (name == "semi-explicit-euler") return std::make_unique<SemiExplicitEuler>(system, settings);
+  if (name == "rk3") return std::make_unique<RungeKutta3>(system, settings);
+  if (name == "rk45") return std::make_unique<RungeKutta45>(system, settings);
   std::string known;
   for (const auto& n : integrator_names()) known += (known.empty() ? "" : ", ") + n;
   throw InputError("unknown integrator '" + name + "' (expected one of: " + known + ")");

@@ -75,6 +75,7 @@ json integrator_json(const IntegratorReport& r) {
   j["error_estimate"] = r.error_estimate;
   j["extrapolated"] = r.extrapolated;
   if (!r.error_estimator.empty()) j["error_estimator"] = r.error_estimator;
+  if (r.jacobian_colours > 0) j["jacobian_colours"] = r.jacobian_colours;
   j["jacobian_scheme"] = r.jacobian_scheme;
   j["newton_form"] = r.newton_form;
   j["linear_solver"] = {{"chosen", r.linear_solver},

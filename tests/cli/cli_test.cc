@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -357,3 +358,51 @@ TEST_F(Cli, UnwritableOutputExitsTwoBeforeRunning) {
 }
 
 }  // namespace
+
+TEST_F(Cli, EveryIntegratorAndJacobianSchemeRuns) {
+  write("small.yaml", kSmallCloth);
+  for (const std::string method : {"vie", "vie2", "ie", "ie2", "rk3", "rk45"}) {
+    const Result r = run("run small.yaml --integrator " + method + " --stats s.json");
+    ASSERT_EQ(r.exit_code, 0) << method << ": " << r.err;
+    const nlohmann::json s = nlohmann::json::parse(read(dir_ / "s.json"));
+    EXPECT_EQ(s["integrator"]["method"], method);
+    EXPECT_EQ(s["integrator"]["extrapolated"], method == "vie2" || method == "ie2") << method;
+  }
+  const Result euler =
+      run("run small.yaml --integrator semi-explicit-euler --fixed-step --step 1e-3");
+  EXPECT_EQ(euler.exit_code, 0) << euler.err;
+  for (const std::string scheme : {"forward", "central", "automatic"}) {
+    const Result r = run("run small.yaml --jacobian " + scheme + " --stats s.json");
+    ASSERT_EQ(r.exit_code, 0) << scheme << ": " << r.err;
+    const nlohmann::json s = nlohmann::json::parse(read(dir_ / "s.json"));
+    EXPECT_EQ(s["integrator"]["jacobian_scheme"], scheme);
+    EXPECT_EQ(s["integrator"].contains("jacobian_colours"), scheme != "automatic") << scheme;
+  }
+  const Result ie = run("run small.yaml --integrator ie --error-estimator doubling --stats s.json");
+  ASSERT_EQ(ie.exit_code, 0) << ie.err;
+  EXPECT_EQ(nlohmann::json::parse(read(dir_ / "s.json"))["integrator"]["error_estimator"],
+            "step doubling");
+}
+
+TEST_F(Cli, ExplicitMethodOnAStiffClothStopsWithTimeAndStep) {
+  // k = 1e6 N/m at h = 1/60 s is far beyond any explicit method's stability
+  // limit: the run must stop with exit code 3, not write a blown-up state.
+  const Result r = run("run '" + kModels +
+                       "cloth_stiff.yaml' --set cloth.nodes=[6,6] --integrator rk45 --output t.csv");
+  ASSERT_EQ(r.exit_code, 3) << r.err;
+  EXPECT_NE(r.err.find("rk45"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("t = "), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("h = "), std::string::npos) << r.err;
+  // Every row written is finite and of the size of the cloth (1 m, a few
+  // m/s): the blow-up is caught before it reaches the file.
+  const std::vector<std::string> rows = split(read(dir_ / "t.csv"), '\n');
+  ASSERT_GE(rows.size(), 3u);
+  EXPECT_EQ(rows.back().rfind("# stopped early: ", 0), 0u) << rows.back();
+  for (size_t i = 1; i + 1 < rows.size(); ++i) {
+    for (const std::string& cell : split(rows[i], ',')) {
+      const double value = std::stod(cell);
+      ASSERT_TRUE(std::isfinite(value)) << rows[i];
+      ASSERT_LT(std::abs(value), 1e3) << "row " << i;
+    }
+  }
+}

@@ -40,7 +40,7 @@ struct SpringDamper {
   }
 };
 
-IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-10) {
+[[maybe_unused]] IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-10) {
   IntegratorSettings s;
   s.fixed_step = true;
   s.max_step = h;
@@ -49,7 +49,7 @@ IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-1
   return s;
 }
 
-std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch,
+[[maybe_unused]] std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch,
                                       std::optional<SpringParameters> bend = SpringParameters{
                                           10.0, 0.05}) {
   ClothSpec spec;
@@ -61,7 +61,7 @@ std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch,
   return std::make_unique<ParticleSystem>(make_cloth(spec));
 }
 
-double fitted_slope(const std::vector<double>& h, const std::vector<double>& e) {
+[[maybe_unused]] double fitted_slope(const std::vector<double>& h, const std::vector<double>& e) {
   // Least-squares slope of log e against log h.
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   const double n = h.size();

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "stiffsim/integrators/integrator_base.h"
+#include "stiffsim/integrators/jacobian_evaluator.h"
 #include "stiffsim/linalg/linear_solver.h"
 
 namespace stiffsim {
@@ -159,6 +160,7 @@ class ImplicitIntegrator : public IntegratorBase {
   void mark_jacobian_stale() { jacobian_step_t_ = std::numeric_limits<double>::quiet_NaN(); }
 
   ImplicitSettings implicit_;
+  JacobianEvaluator jacobian_evaluator_;
   ForceJacobians jacobians_;
   bool jacobians_valid_ = false;
   Eigen::VectorXd x_big_, x_half_, x_small_;

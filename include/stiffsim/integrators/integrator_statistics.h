@@ -65,6 +65,7 @@ struct IntegratorReport {
   std::string error_estimator;  // how, where a method has a choice
   bool extrapolated = false;
   std::string jacobian_scheme;         // empty for explicit methods
+  int jacobian_colours = 0;            // finite differences: column groups of the pattern
   std::string newton_form;             // "mass-matrix" or "generic"
   std::string linear_solver;           // method in use
   std::string linear_solver_reason;    // why it was chosen
