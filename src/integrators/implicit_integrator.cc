@@ -287,7 +287,10 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     }
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
     if (c == Convergence::kConverged) return passes_energy_guard(x0, *x, true);
-    if (c == Convergence::kDiverged) return false;
+    // A search that decreased the potential made progress whatever the
+    // update sizes say (a descent method on G cannot diverge); only the
+    // iteration budget ends it.
+    if (c == Convergence::kDiverged && !descend_potential) return false;
     last_norm = norm;
   }
   return false;
