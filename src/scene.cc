@@ -266,6 +266,21 @@ void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVecto
   }
 }
 
+std::vector<int> Scene::jacobian_colouring_hint() const {
+  if (components_.size() == 1) return components_[0]->jacobian_colouring_hint();
+  std::vector<int> colour(dims_.nx(), -1);
+  for (size_t i = 0; i < components_.size(); ++i) {
+    const std::vector<int> part = components_[i]->jacobian_colouring_hint();
+    const Dimensions d = components_[i]->dimensions();
+    if (static_cast<int>(part.size()) != d.nx()) return {};
+    const Dimensions& o = offsets_[i];
+    for (int k = 0; k < d.nq; ++k) colour[o.nq + k] = part[k];
+    for (int k = 0; k < d.nv; ++k) colour[dims_.nq + o.nv + k] = part[d.nq + k];
+    for (int k = 0; k < d.nz; ++k) colour[dims_.nq + dims_.nv + o.nz + k] = part[d.nq + d.nv + k];
+  }
+  return colour;
+}
+
 double Scene::energy(const State& s) const {
   if (!caps_.has_energy) return std::nan("");
   double e = 0.0;

@@ -43,6 +43,9 @@ class Scene : public System {
   void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                  const ConstVectorRef& z, const JacobianRequest& request,
                                  ForceJacobians* J) const override;
+  // The components' hints side by side (components share no rows, so their
+  // colours may coincide); empty unless every component has one.
+  std::vector<int> jacobian_colouring_hint() const override;
   double energy(const State& s) const override;
 
   int component_count() const { return static_cast<int>(components_.size()); }

@@ -118,6 +118,13 @@ class System {
                                          const ConstVectorRef& z, const JacobianRequest& request,
                                          ForceJacobians* J) const;
 
+  // A colouring of the columns of x = (q, v, z) for finite-difference
+  // Jacobians that the system knows from its structure (a lattice), one
+  // colour per column, -1 for columns without entries; empty when it knows
+  // none. JacobianEvaluator checks it and uses it when it needs fewer colours
+  // than its greedy colouring.
+  virtual std::vector<int> jacobian_colouring_hint() const { return {}; }
+
   // Total energy (kinetic + potential) where defined, NaN otherwise.
   virtual double energy(const State& s) const {
     (void)s;

@@ -1,5 +1,7 @@
 #include "stiffsim/integrators/jacobian_evaluator.h"
 
+#include <algorithm>
+
 #include <array>
 #include <cassert>
 #include <cmath>
@@ -90,6 +92,17 @@ JacobianEvaluator::JacobianEvaluator(const System& system, JacobianScheme scheme
                        (b % 3 == 0) ? 0 : (b % 3 == 1 ? dims_.nq : dims_.nq + dims_.nv)});
   }
   colouring_ = colour_columns(dims_.ny(), dims_.nx(), stacked);
+  // A structured system may know a better colouring (a lattice tiling):
+  // taken when it is valid and cheaper.
+  const std::vector<int> hint = system.jacobian_colouring_hint();
+  if (static_cast<int>(hint.size()) == dims_.nx()) {
+    ColumnColouring known{hint, 0};
+    for (int c : hint) known.colours = std::max(known.colours, c + 1);
+    if (known.colours < colouring_.colours &&
+        is_valid_colouring(dims_.ny(), dims_.nx(), stacked, known)) {
+      colouring_ = std::move(known);
+    }
+  }
   colour_start_.assign(colouring_.colours + 1, 0);
   for (int c : colouring_.colour) {
     if (c >= 0) ++colour_start_[c + 1];

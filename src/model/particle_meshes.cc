@@ -106,9 +106,11 @@ ParticleDescription make_cloth(const ClothSpec& spec) {
   d.gravity = spec.gravity;
   d.drag = spec.drag;
   d.positions.resize(n);
+  d.lattice.resize(n);
   for (int j = 0; j < ny; ++j) {
     for (int i = 0; i < nx; ++i) {
       d.positions[id(i, j)] = {i * spec.width / (nx - 1), j * spec.height / (ny - 1), 0.0};
+      d.lattice[id(i, j)] = {i, j};
     }
   }
   d.masses.assign(n, spec.total_mass / n);

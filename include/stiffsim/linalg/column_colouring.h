@@ -35,7 +35,9 @@ struct ColumnColouring {
 // bounds set by the stencil, not the size. A band meets the lower bound; a
 // cloth grid (stretch, shear, bend: lower bound 78 over (q, v)) lands about
 // 35% above it and drifts up slowly with the rows' length (102 colours at
-// 10x10, 108 at 60x60), the price of greedy against a lattice colouring.
+// 10x10, 108 at 60x60), the price of greedy against a lattice colouring
+// (which systems that know their lattice provide instead:
+// System::jacobian_colouring_hint).
 // Throws std::invalid_argument if a block does not fit.
 ColumnColouring colour_columns(int rows, int cols, const std::vector<PatternBlock>& blocks);
 
