@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <limits>
 #include <memory>
@@ -27,6 +28,13 @@ namespace stiffsim {
 namespace {
 
 constexpr int kUsageExitCode = 2;  // same as InputError: the user's input is wrong
+
+// SIGINT or SIGTERM during a run: the run stops after the step in progress
+// and finishes its files as a failed run does (complete rows, marked as
+// stopped early), exiting with 128 + the signal as shells expect.
+volatile std::sig_atomic_t g_stop_signal = 0;
+extern "C" void request_stop(int signal) { g_stop_signal = signal; }
+struct Interrupted {};
 
 std::string join(const std::vector<std::string>& items, const std::string& separator) {
   std::string out;
@@ -179,7 +187,8 @@ void add_run_options(CLI::App* run, RunOptions* o) {
 
   run->footer(
       "Exit codes: 0 done; 2 bad input (scene, options); 3 integration failed (the CSV keeps "
-      "the rows so far, marked '# stopped early'); 1 other errors.\n"
+      "the rows so far, marked '# stopped early'); 130 / 143 stopped by SIGINT / SIGTERM (the "
+      "files are finished the same way); 1 other errors.\n"
       "Example: stiffsim run models/cloth.yaml --t-final 0.5 --set cloth.nodes=[16,16] "
       "--output cloth.csv --stats cloth.json --summary");
 }
@@ -334,7 +343,12 @@ int run_command(const RunOptions& options) {
     return true;
   };
   ProgressBar bar(!options.quiet && isatty(STDERR_FILENO), config.simulation.t_final);
-  const ProgressCallback on_progress = [&](double fraction) { bar.update(fraction); };
+  const ProgressCallback on_progress = [&](double fraction) {
+    bar.update(fraction);
+    if (g_stop_signal != 0) throw Interrupted{};
+  };
+  std::signal(SIGINT, request_stop);
+  std::signal(SIGTERM, request_stop);
 
   int exit_code = 0;
   std::string failure;
@@ -344,6 +358,13 @@ int run_command(const RunOptions& options) {
         simulate(*integrator, initial, config.simulation, on_sample, on_progress);
     summary.stopped_early = result.stopped_early;
     if (result.stopped_early) summary.stop_reason = "stopped by the sample callback";
+  } catch (const Interrupted&) {
+    exit_code = 128 + g_stop_signal;
+    char message[200];
+    std::snprintf(message, sizeof(message), "interrupted by %s at t = %g s (last step h = %g s)",
+                  g_stop_signal == SIGINT ? "SIGINT" : "SIGTERM", integrator->state().t,
+                  integrator->state().t - integrator->previous_time());
+    failure = message;
   } catch (const IntegrationError& e) {
     // The integrator's message names the time, the step and the method
     // (error.h), so it is passed on as is.

@@ -406,3 +406,27 @@ TEST_F(Cli, ExplicitMethodOnAStiffClothStopsWithTimeAndStep) {
     }
   }
 }
+
+TEST_F(Cli, SigintStopsCleanlyAndKeepsCompleteRows) {
+  // A run far longer than the 2 s after which timeout(1) sends SIGINT.
+  const std::string command = "cd '" + dir_.string() + "' && timeout --preserve-status -s INT 2 '" +
+                              STIFFSIM_CLI "' run '" + kModels +
+                              "cloth.yaml' --t-final 1000 --output t.csv --stats s.json -q "
+                              ">stdout.txt 2>stderr.txt </dev/null";
+  const int status = std::system(command.c_str());
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 130);
+  const std::string err = read(dir_ / "stderr.txt");
+  EXPECT_NE(err.find("interrupted by SIGINT at t = "), std::string::npos) << err;
+  const std::vector<std::string> rows = split(read(dir_ / "t.csv"), '\n');
+  ASSERT_GE(rows.size(), 3u);
+  EXPECT_EQ(rows.back().rfind("# stopped early: interrupted by SIGINT", 0), 0u) << rows.back();
+  // Every data row is complete: as many cells as the header.
+  const size_t columns = split(rows[0], ',').size();
+  for (size_t i = 1; i + 1 < rows.size(); ++i) EXPECT_EQ(split(rows[i], ',').size(), columns);
+  const nlohmann::json s = nlohmann::json::parse(read(dir_ / "s.json"));
+  EXPECT_EQ(s["stopped_early"], true);
+  EXPECT_EQ(s["samples"].get<size_t>(), rows.size() - 2);
+  // No temporary file is left behind.
+  EXPECT_EQ(outputs({"stdout.txt", "stderr.txt"}), (std::set<std::string>{"s.json", "t.csv"}));
+}
