@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <string_view>
@@ -46,7 +47,7 @@ bool parse_int(std::string_view token, long* out) {
 
 class ObjParser {
  public:
-  explicit ObjParser(const std::string& source) : source_(source) {}
+  explicit ObjParser(const std::string& source) : source_(source) { mesh_.source = source; }
 
   [[noreturn]] void fail(int line, const std::string& what) const {
     throw InputError(source_ + ":" + std::to_string(line) + ": " + what);
@@ -70,6 +71,7 @@ class ObjParser {
       }
     }
     mesh_.vertices.push_back(p);
+    mesh_.vertex_lines.push_back(line);
   }
 
   // "v", "v/vt", "v//vn" or "v/vt/vn": only the vertex index matters, but the
@@ -119,6 +121,7 @@ class ObjParser {
     // (usually planar quad) faces that exporters write.
     for (size_t i = 1; i + 1 < corners_.size(); ++i) {
       mesh_.triangles.push_back({corners_[0], corners_[i], corners_[i + 1]});
+      mesh_.triangle_lines.push_back(line);
     }
   }
 
@@ -166,6 +169,17 @@ TriangleMesh parse_obj(const std::string& text, const std::string& source_name) 
     pos = end + 1;
     ++line_number;
     if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    // A binary file (an STL, a zip) named as an OBJ would otherwise end in a
+    // puzzling "no faces" or number error somewhere down the file.
+    for (const char ch : line) {
+      const auto byte = static_cast<unsigned char>(ch);
+      if ((byte < 0x20 && !is_space(ch)) || byte == 0x7f) {
+        char hex[8];
+        std::snprintf(hex, sizeof hex, "0x%02x", byte);
+        parser.fail(line_number, std::string("not a text file (control byte ") + hex +
+                                     "): expected an OBJ mesh");
+      }
+    }
     if (logical.empty()) logical_start = line_number;
     if (!line.empty() && line.back() == '\\') {
       logical.append(line.data(), line.size() - 1);

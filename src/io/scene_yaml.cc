@@ -1,11 +1,13 @@
 #include "stiffsim/io/scene_yaml.h"
 
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -36,6 +38,10 @@ namespace {
 // gigabytes for its Jacobians); a typo like nodes: [10000, 10000] should be an
 // error, not an out-of-memory kill.
 constexpr long kMaxTotalNodes = 10'000'000;
+
+// Likewise for the length of a run: at a microsecond a step, 10^9 steps of the
+// smallest scene already take a quarter of an hour.
+constexpr double kMaxSteps = 1e9;
 
 std::vector<std::string> top_level_keys() { return {"gravity", "components", "simulation"}; }
 
@@ -218,7 +224,19 @@ class Section {
   }
   YAML::Node get(const std::string& key) const { return map_[key]; }
   YAML::Node require(const std::string& key) const {
-    if (!has(key)) doc_.fail(map_, context_, "missing required key '" + label(key) + "'");
+    if (!has(key)) {
+      // `total_mass:` with nothing after it is a value forgotten, not a key
+      // forgotten: point at the key's line.
+      for (const auto& entry : map_) {
+        if (entry.first.Scalar() == key) {
+          // An empty value may carry no position; its key always does.
+          const bool placed = entry.second.Mark().line >= 0;
+          doc_.fail(placed ? entry.second : entry.first, context_,
+                    "required key '" + label(key) + "' has no value (null or empty)");
+        }
+      }
+      doc_.fail(map_, context_, "missing required key '" + label(key) + "'");
+    }
     return map_[key];
   }
 
@@ -379,13 +397,24 @@ struct BuiltComponent {
 };
 
 // Errors of the model builders know the component but not the file or line.
+// They start with the component's name, which the context already gives
+// ("components[0] (cloth): cloth: ..." would say it twice).
 template <typename Build>
-auto with_location(const Section& component, Build build) -> decltype(build()) {
+auto with_location(const Section& component, const std::string& name, const YAML::Node& at,
+                   Build build) -> decltype(build()) {
   try {
     return build();
   } catch (const InputError& e) {
-    component.fail(component.map(), e.what());
+    std::string what = e.what();
+    const std::string prefix = name + ": ";
+    if (what.compare(0, prefix.size(), prefix) == 0) what.erase(0, prefix.size());
+    component.fail(at, what);
   }
+}
+template <typename Build>
+auto with_location(const Section& component, const std::string& name, Build build)
+    -> decltype(build()) {
+  return with_location(component, name, component.map(), build);
 }
 
 BuiltComponent build_cloth(const Section& c, const std::string& name, const Eigen::Vector3d& g) {
@@ -413,7 +442,7 @@ BuiltComponent build_cloth(const Section& c, const std::string& name, const Eige
   spec.gravity = g;
 
   BuiltComponent built;
-  built.description = with_location(c, [&] { return make_cloth(spec); });
+  built.description = with_location(c, name, [&] { return make_cloth(spec); });
   // Two triangles per grid cell, counter-clockwise seen from +z.
   for (int j = 0; j + 1 < spec.ny; ++j) {
     for (int i = 0; i + 1 < spec.nx; ++i) {
@@ -437,7 +466,7 @@ BuiltComponent build_rope(const Section& c, const std::string& name, const Eigen
   spec.drag = c.number_or("drag", Range::kNonNegative, 0.0);
   spec.gravity = g;
   BuiltComponent built;
-  built.description = with_location(c, [&] { return make_rope(spec); });
+  built.description = with_location(c, name, [&] { return make_rope(spec); });
   return built;
 }
 
@@ -449,6 +478,10 @@ BuiltComponent build_mesh(const Section& c, const std::string& name, const Eigen
   std::filesystem::path resolved(file);
   if (resolved.is_relative()) resolved = base_dir / resolved;
   std::error_code error;
+  if (std::filesystem::is_directory(resolved, error)) {
+    c.fail(c.get("file"), "mesh file '" + file + "' is a directory (" +
+                              resolved.lexically_normal().string() + "), expected an OBJ file");
+  }
   if (!std::filesystem::is_regular_file(resolved, error)) {
     c.fail(c.get("file"), "mesh file '" + file + "' not found (looked for " +
                               resolved.lexically_normal().string() + ")");
@@ -471,7 +504,10 @@ BuiltComponent build_mesh(const Section& c, const std::string& name, const Eigen
   spec.gravity = g;
   BuiltComponent built;
   built.surface = spec.mesh.triangles;
-  built.description = with_location(c, [&] { return make_surface_mesh(spec); });
+  // Errors about the mesh's faces and vertices name the OBJ file and line
+  // themselves; the scene's part is the line that loads it.
+  built.description =
+      with_location(c, name, c.get("file"), [&] { return make_surface_mesh(spec); });
   return built;
 }
 
@@ -489,6 +525,20 @@ void read_simulation(const Section& top, SceneConfig* config) {
   config->integrator_name = s.choice_or("integrator", integrator_names(), config->integrator_name);
   config->simulation.t_final = s.number_or("t_final", Range::kPositive, config->simulation.t_final);
   config->integrator.max_step = s.number_or("step", Range::kPositive, config->integrator.max_step);
+  // Even error control cannot take steps longer than `step`, so a run needs at
+  // least t_final / step of them; beyond kMaxSteps that is a typo in an
+  // exponent (step: 1e-310), and the run would never end.
+  if (config->simulation.t_final / config->integrator.max_step > kMaxSteps) {
+    std::ostringstream what;
+    if (s.has("step")) {
+      what << "step " << config->integrator.max_step << " would need more than " << kMaxSteps
+           << " steps to reach t_final " << config->simulation.t_final;
+    } else {
+      what << "t_final " << config->simulation.t_final << " would need more than " << kMaxSteps
+           << " steps of the default step " << config->integrator.max_step;
+    }
+    s.fail(s.has("step") ? s.get("step") : s.get("t_final"), what.str());
+  }
   config->integrator.fixed_step = s.boolean_or("fixed_step", config->integrator.fixed_step);
   config->integrator.error_estimate =
       s.boolean_or("error_estimate", config->integrator.error_estimate);
@@ -499,8 +549,11 @@ void read_simulation(const Section& top, SceneConfig* config) {
   config->integrator.min_step =
       s.number_or("min_step", Range::kNonNegative, config->integrator.min_step);
   if (config->integrator.min_step > config->integrator.max_step) {
+    // Shortest round-trip form: "0.01", not std::to_string's "0.010000".
+    std::ostringstream step;
+    step << config->integrator.max_step;
     s.fail(s.get("min_step"),
-           "min_step must not exceed step (" + std::to_string(config->integrator.max_step) + ")");
+           "min_step must not exceed step (" + step.str() + "), got " + s.get("min_step").Scalar());
   }
   ImplicitSettings& implicit = config->implicit;
   if (s.has("jacobian")) {
@@ -544,8 +597,11 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
     std::string context = "components[" + std::to_string(i) + "]";
     if (!node.IsMap()) doc.fail(node, context, "expected a map, got " + node_kind(node));
     const YAML::Node name_node = node["name"];
-    if (!name_node.IsDefined() || !name_node.IsScalar()) {
+    if (!name_node.IsDefined() || name_node.IsNull()) {
       doc.fail(node, context, "missing required key 'name'");
+    }
+    if (!name_node.IsScalar()) {
+      doc.fail(name_node, context, "name must be a string, got " + node_kind(name_node));
     }
     const std::string name = name_node.Scalar();
     context += " (" + name + ")";
@@ -594,7 +650,7 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
                "the scene has more than " + std::to_string(kMaxTotalNodes) + " nodes in total");
     }
     components.push_back(with_location(
-        c, [&] { return std::make_unique<ParticleSystem>(std::move(built.description)); }));
+        c, name, [&] { return std::make_unique<ParticleSystem>(std::move(built.description)); }));
     config.surfaces.push_back(std::move(built.surface));
   }
   try {
@@ -707,17 +763,73 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
   doc->add_override(text, value);
 }
 
+// Binary data (a mesh or an archive named as the scene) makes yaml-cpp
+// report an odd escape or indentation problem; name the first byte YAML does
+// not allow instead: C0 controls other than tab, LF and CR, and DEL.
+void check_text(const std::string& text, const std::string& source_name) {
+  int line = 1, column = 1;
+  for (const char ch : text) {
+    const auto byte = static_cast<unsigned char>(ch);
+    if ((byte < 0x20 && ch != '\t' && ch != '\n' && ch != '\r') || byte == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "0x%02x", byte);
+      throw InputError(source_name + ":" + std::to_string(line) + ":" + std::to_string(column) +
+                       ": not a text file (control byte " + hex + "): expected a YAML scene");
+    }
+    if (ch == '\n') {
+      ++line;
+      column = 1;
+    } else {
+      ++column;
+    }
+  }
+}
+
+// yaml-cpp's parser messages describe its state ("end of map not found"); say
+// what the user most likely has to fix. A tab in the indentation is reported
+// at its own line, since yaml-cpp stops somewhere after it.
+std::string malformed_yaml(const std::string& text, const std::string& source_name,
+                           const YAML::ParserException& e) {
+  std::istringstream lines(text);
+  int number = 0;
+  for (std::string line; std::getline(lines, line);) {
+    ++number;
+    const size_t indent = line.find_first_not_of(" \t");
+    const size_t tab = line.find('\t');
+    if (tab != std::string::npos && tab < indent && indent != std::string::npos &&
+        number <= e.mark.line + 1) {
+      return source_name + ":" + std::to_string(number) + ":" + std::to_string(tab + 1) +
+             ": malformed YAML: a tab indents this line (YAML indentation must use spaces)";
+    }
+  }
+  std::string hint;
+  if (e.msg == YAML::ErrorMsg::END_OF_SEQ_FLOW) {
+    hint = " (a '[' is not closed by ']')";
+  } else if (e.msg == YAML::ErrorMsg::END_OF_MAP_FLOW) {
+    hint = " (a '{' is not closed by '}')";
+  } else if (e.msg == YAML::ErrorMsg::END_OF_MAP || e.msg == YAML::ErrorMsg::END_OF_SEQ) {
+    hint = " (check the indentation of this line against the lines above)";
+  }
+  return source_name + ":" + std::to_string(e.mark.line + 1) + ":" +
+         std::to_string(e.mark.column + 1) + ": malformed YAML: " + e.msg + hint;
+}
+
 }  // namespace
 
 SceneConfig parse_scene(const std::string& text, const std::string& source_name,
                         const std::vector<std::string>& overrides) {
   Document doc(source_name);
+  check_text(text, source_name);
   YAML::Node root;
   try {
     root = YAML::Load(text);
-  } catch (const YAML::ParserException& e) {
+  } catch (const YAML::DeepRecursion& e) {
+    // yaml-cpp 0.7 gives this the message "bad file"; say what it means.
     throw InputError(source_name + ":" + std::to_string(e.mark.line + 1) + ":" +
-                     std::to_string(e.mark.column + 1) + ": malformed YAML: " + e.msg);
+                     std::to_string(e.mark.column + 1) + ": malformed YAML: nested too deeply (" +
+                     std::to_string(e.depth()) + " levels of lists and maps)");
+  } catch (const YAML::ParserException& e) {
+    throw InputError(malformed_yaml(text, source_name, e));
   } catch (const YAML::Exception& e) {
     throw InputError(source_name + ": malformed YAML: " + e.what());
   }

@@ -185,9 +185,17 @@ ParticleDescription make_surface_mesh(const SurfaceMeshSpec& spec) {
   check_node_count(who, static_cast<long>(mesh.vertices.size()));
   if (mesh.triangles.empty()) fail(who, "mesh has no triangles");
   const int n = static_cast<int>(mesh.vertices.size());
+  // "<file>:<line>: " of a vertex or a triangle's face when the mesh was read
+  // from a file, so the user is sent to the line to fix.
+  auto at_line = [&](const std::vector<int>& lines, size_t i) {
+    if (mesh.source.empty() || i >= lines.size()) return std::string();
+    return mesh.source + ":" + std::to_string(lines[i]) + ": ";
+  };
+  auto at_vertex = [&](int i) { return at_line(mesh.vertex_lines, static_cast<size_t>(i)); };
+  auto at_triangle = [&](size_t t) { return at_line(mesh.triangle_lines, t); };
   for (int i = 0; i < n; ++i) {
     if (!mesh.vertices[i].allFinite()) {
-      fail(who, "vertex " + std::to_string(i) + " has a non-finite coordinate");
+      fail(who, at_vertex(i) + "vertex " + std::to_string(i) + " has a non-finite coordinate");
     }
   }
 
@@ -207,7 +215,7 @@ ParticleDescription make_surface_mesh(const SurfaceMeshSpec& spec) {
   uses.reserve(3 * mesh.triangles.size());
   for (size_t t = 0; t < mesh.triangles.size(); ++t) {
     const std::array<int, 3>& tri = mesh.triangles[t];
-    const std::string tag = "triangle " + std::to_string(t) + " (vertices " +
+    const std::string tag = at_triangle(t) + "triangle " + std::to_string(t) + " (vertices " +
                             std::to_string(tri[0]) + ", " + std::to_string(tri[1]) + ", " +
                             std::to_string(tri[2]) + ")";
     for (int v : tri) {
@@ -230,8 +238,8 @@ ParticleDescription make_surface_mesh(const SurfaceMeshSpec& spec) {
   }
   for (int i = 0; i < n; ++i) {
     if (d.masses[i] == 0.0) {
-      fail(who, "vertex " + std::to_string(i) + " (OBJ vertex " + std::to_string(i + 1) +
-                    ") belongs to no triangle, so it would have no mass");
+      fail(who, at_vertex(i) + "vertex " + std::to_string(i) + " (OBJ vertex " +
+                    std::to_string(i + 1) + ") belongs to no triangle, so it would have no mass");
     }
   }
   std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
@@ -255,9 +263,14 @@ ParticleDescription make_surface_mesh(const SurfaceMeshSpec& spec) {
       const EdgeUse& x = uses[first];
       const EdgeUse& y = uses[first + 1];
       if (x.opposite == y.opposite) {
-        fail(who, "triangles " + std::to_string(x.triangle) + " and " + std::to_string(y.triangle) +
-                      " are the same triangle (vertices " + std::to_string(x.lo) + ", " +
-                      std::to_string(x.hi) + ", " + std::to_string(x.opposite) + ")");
+        const std::string first_at = at_triangle(x.triangle);
+        fail(who, at_triangle(y.triangle) + "triangles " + std::to_string(x.triangle) + " and " +
+                      std::to_string(y.triangle) + " are the same triangle (vertices " +
+                      std::to_string(x.lo) + ", " + std::to_string(x.hi) + ", " +
+                      std::to_string(x.opposite) + ")" +
+                      (first_at.empty()
+                           ? std::string()
+                           : "; the first is at " + first_at.substr(0, first_at.size() - 2)));
       }
       bend_pairs.emplace_back(x.opposite, y.opposite);
     }

@@ -152,6 +152,35 @@ TEST(ObjMesh, LoadedSquareBuildsFiveStretchAndOneBendSpring) {
   EXPECT_DOUBLE_EQ(total, 2.0);  // density * area
 }
 
+// The mesh keeps where each vertex and face was, so that make_surface_mesh's
+// complaints about geometry (a degenerate face, an unused vertex) can send
+// the user to the line.
+TEST(ObjMesh, RecordsTheLineOfEveryVertexAndTriangle) {
+  const TriangleMesh mesh =
+      parse_obj("# a quad\nv 0 0 0\nv 1 0 0\n\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", "q.obj");
+  EXPECT_EQ(mesh.source, "q.obj");
+  EXPECT_EQ(mesh.vertex_lines, (std::vector<int>{2, 3, 5, 6}));
+  EXPECT_EQ(mesh.triangle_lines, (std::vector<int>{7, 7}));  // both halves of the quad
+
+  TriangleMesh collinear = parse_obj("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "c.obj");
+  SurfaceMeshSpec spec;
+  spec.name = "sheet";
+  spec.mesh = collinear;
+  try {
+    make_surface_mesh(spec);
+    FAIL() << "accepted a degenerate face";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("sheet: c.obj:4: triangle 0"), std::string::npos)
+        << e.what();
+  }
+}
+
+// Binary data is named as such, at the line where it starts.
+TEST(ObjMesh, BinaryDataIsNotAText) {
+  EXPECT_EQ(error_of(std::string("v 0 0 0\nsolid\0\1", 15)),
+            "test.obj:2: not a text file (control byte 0x00): expected an OBJ mesh");
+}
+
 TEST(ObjMesh, ShippedSheetIsAUnitSquareHangingFromNodesZeroAndSeven) {
   const TriangleMesh mesh = load_obj(STIFFSIM_SOURCE_DIR "/models/meshes/sheet.obj");
   ASSERT_EQ(mesh.vertices.size(), 64u);

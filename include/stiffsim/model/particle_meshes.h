@@ -43,6 +43,13 @@ struct RopeSpec {
 struct TriangleMesh {
   std::vector<Eigen::Vector3d> vertices;
   std::vector<std::array<int, 3>> triangles;  // 0-based vertex indices
+  // Where the mesh came from, when it was read from a file (load_obj fills
+  // these): make_surface_mesh's errors about a face or a vertex then name the
+  // file and line to fix, not only an index after triangulation. Empty for
+  // meshes built in memory.
+  std::string source;
+  std::vector<int> vertex_lines;    // per vertex, its 1-based line in `source`
+  std::vector<int> triangle_lines;  // per triangle, the line of its face
 };
 
 struct SurfaceMeshSpec {
