@@ -21,7 +21,8 @@
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
 
-#if defined(__GLIBC__)
+// Not under AddressSanitizer, whose own malloc a replacement would shadow.
+#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
 // Counts heap allocations while g_counting is set: evaluate() must allocate
 // nothing (its workspaces are sized in the constructor).
 extern "C" void* __libc_malloc(size_t size);

@@ -10,7 +10,8 @@
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
 
-#if defined(__GLIBC__)
+// Not under AddressSanitizer, whose own malloc a replacement would shadow.
+#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
 extern "C" void* __libc_malloc(size_t size);
 static std::atomic<bool> g_counting{false};
 static std::atomic<long> g_allocations{0};

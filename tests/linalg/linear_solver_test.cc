@@ -20,7 +20,8 @@
 // Counting allocations: glibc lets an executable interpose malloc and reach
 // the real allocator through __libc_malloc, which catches allocations made by
 // Eigen, CHOLMOD and UMFPACK alike (operator new ends in malloc too).
-#if defined(__GLIBC__)
+// Not under AddressSanitizer, whose own malloc a replacement would shadow.
+#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
 #define STIFFSIM_COUNT_ALLOCATIONS 1
 namespace {
 std::atomic<bool> counting_allocations{false};

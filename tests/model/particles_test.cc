@@ -17,7 +17,8 @@
 #include "stiffsim/error.h"
 #include "stiffsim/model/particle_meshes.h"
 
-#if defined(__GLIBC__)
+// Not under AddressSanitizer, whose own malloc a replacement would shadow.
+#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
 // Counts every heap allocation (operator new and Eigen both end in malloc) while
 // g_count_allocations is set, to check that the hot path allocates nothing.
 extern "C" void* __libc_malloc(size_t size);
