@@ -69,7 +69,7 @@ void ImplicitEuler::do_initialize() {
 
   initialize_newton(d.nx());
   theta_ = 1.0;
-  for (Eigen::VectorXd* v : {&x_ie_, &x_trap_, &xdot0_, &linearization_}) v->resize(d.nx());
+  for (Eigen::VectorXd* v : {&x_ie_, &x_trap_, &xdot0_}) v->resize(d.nx());
   qdot_.resize(d.nq);
   F_.resize(d.nv);
   zdot_.resize(d.nz);
@@ -82,18 +82,11 @@ void ImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double 
   // a cloth at rest and flat has no transverse stiffness at x0, and the two
   // methods should differ in their Newton systems, not in where they
   // linearize.
-  const Dimensions& d = dims_;
-  linearization_ = x;
-  if (caps_.identity_velocity_map) {
-    linearization_.segment(0, d.nq) += h * x.segment(d.nq, d.nv);
-  } else {
-    system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), qdot_);
-    ++stats_.velocity_map_evaluations;
-    linearization_.segment(0, d.nq) += h * qdot_;
-    system_.velocity_map(linearization_.segment(0, d.nq), &N_);
+  compute_force_jacobians_ahead(t, x, h);
+  if (!caps_.identity_velocity_map) {
+    system_.velocity_map(linearization_.segment(0, dims_.nq), &N_);
     ++stats_.velocity_map_evaluations;
   }
-  compute_force_jacobians(t, linearization_);
 }
 
 bool ImplicitEuler::form_and_factor(double h) {

@@ -108,6 +108,20 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   jacobians_valid_ = true;
 }
 
+void ImplicitIntegrator::compute_force_jacobians_ahead(double t, const Eigen::VectorXd& x,
+                                                       double h) {
+  const Dimensions& d = dims_;
+  linearization_ = x;
+  if (caps_.identity_velocity_map) {
+    linearization_.segment(0, d.nq) += h * x.segment(d.nq, d.nv);
+  } else {
+    system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), predictor_qdot_);
+    ++stats_.velocity_map_evaluations;
+    linearization_.segment(0, d.nq) += h * predictor_qdot_;
+  }
+  compute_force_jacobians(t, linearization_);
+}
+
 bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric,
                                                  double h) {
   IterationMatrix& m = matrices_[active_];
@@ -140,6 +154,8 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_}) v->resize(nx);
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(unknowns);
   x_prev_.resize(nx);
+  linearization_.resize(nx);
+  predictor_qdot_.resize(dims_.nq);
   energy_state_.x = Eigen::VectorXd::Zero(nx);
   guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive;
   jacobians_valid_ = false;

@@ -78,7 +78,7 @@ void VelocityImplicitEuler::do_initialize() {
   for (int i = 0; i < d.ny(); ++i) identity_slots_[i] = slot_of(iteration_matrix_, i, i);
 
   initialize_newton(d.ny());
-  linearization_.resize(d.nx());
+  residual_state_.resize(d.nx());
   energy_state_.x = Eigen::VectorXd::Zero(d.nx());
   // G is a valid merit where the residual is its gradient: the mass-matrix
   // form of a passive scene with energy, analytic Jacobians, N = I, a
@@ -136,19 +136,10 @@ bool VelocityImplicitEuler::form_and_factor(double h) {
 
 void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double h) {
   const Dimensions& d = dims_;
-  // Linearize where the step is heading: q_n + h N(q_n) v_n, as Drake does.
-  linearization_ = x;
-  if (caps_.identity_velocity_map) {
-    linearization_.segment(0, d.nq) += h * x.segment(d.nq, d.nv);
-  } else {
-    system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), qdot_);
-    ++stats_.velocity_map_evaluations;
-    linearization_.segment(0, d.nq) += h * qdot_;
-    system_.velocity_map(x.segment(0, d.nq), &N_);
-    ++stats_.velocity_map_evaluations;
-  }
-  compute_force_jacobians(t, linearization_);
+  compute_force_jacobians_ahead(t, x, h);
   if (!caps_.identity_velocity_map) {
+    system_.velocity_map(x.segment(0, d.nq), &N_);  // N(q_n): lagged, as the seed says
+    ++stats_.velocity_map_evaluations;
     // The products K N and dfz/dq N keep their (structural) pattern; their
     // slots are looked up again because Eigen may order a product freshly.
     KN_ = jacobians_.dF_dq * N_;
@@ -165,18 +156,18 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
   // The residual is exact: q = q_n + h N(q_k) v is rebuilt from the current
   // v before F is evaluated, as in Drake's l(y).
   const Dimensions& d = dims_;
-  linearization_ = x;
+  residual_state_ = x;
   if (caps_.identity_velocity_map) {
-    linearization_.segment(0, d.nq) = x0.segment(0, d.nq) + h * x.segment(d.nq, d.nv);
+    residual_state_.segment(0, d.nq) = x0.segment(0, d.nq) + h * x.segment(d.nq, d.nv);
   } else {
     system_.map_velocity_to_qdot(x.segment(0, d.nq), x.segment(d.nq, d.nv), qdot_);
     ++stats_.velocity_map_evaluations;
-    linearization_.segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
+    residual_state_.segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
   }
-  evaluate_forces(t, linearization_, &F_, &zdot_);
+  evaluate_forces(t, residual_state_, &F_, &zdot_);
   const auto v = x.segment(d.nq, d.nv);
   const auto v0 = x0.segment(d.nq, d.nv);
-  const SparseMatrix& M = mass_matrix_at(linearization_.segment(0, d.nq));
+  const SparseMatrix& M = mass_matrix_at(residual_state_.segment(0, d.nq));
   if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
     const double* m = M.valuePtr();
     for (int i = 0; i < d.nv; ++i) (*r)[i] = m[i] * (v[i] - v0[i]) - h * F_[i];

@@ -18,70 +18,16 @@
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
 #include "stiffsim/model/robertson.h"
+#include "test_systems.h"
 
 namespace stiffsim {
 namespace {
-
-// One particle of mass m on a spring (k, c) to a pinned anchor, along x, no
-// gravity: m x'' = -k (x - L) - c x'. State: q = (x, 0, 0), v = (x', 0, 0).
-struct SpringDamper {
-  double m = 1.0, k = 100.0, c = 2.0, L = 1.0, x0 = 1.2;
-  std::unique_ptr<ParticleSystem> system() const {
-    ParticleDescription d;
-    d.name = "sd";
-    d.positions = {Eigen::Vector3d::Zero(), Eigen::Vector3d(x0, 0, 0)};
-    d.masses = {1.0, m};
-    d.springs = {Spring{0, 1, L, k, c}};
-    d.pinned = {0};
-    d.gravity.setZero();
-    return std::make_unique<ParticleSystem>(d);
-  }
-  double zeta() const { return c / (2 * std::sqrt(k * m)); }
-  double w0() const { return std::sqrt(k / m); }
-  double wd() const { return w0() * std::sqrt(1 - zeta() * zeta()); }
-  // Underdamped closed form of the displacement u = x - L from u0, u'(0) = 0.
-  double position(double t) const {
-    const double u0 = x0 - L, a = zeta() * w0();
-    return L + std::exp(-a * t) * (u0 * std::cos(wd() * t) + u0 * a / wd() * std::sin(wd() * t));
-  }
-  double velocity(double t) const {
-    const double u0 = x0 - L, a = zeta() * w0();
-    return -u0 * w0() * w0() / wd() * std::exp(-a * t) * std::sin(wd() * t);
-  }
-  // The exact state (q, v) at t.
-  State exact(double t) const {
-    Eigen::VectorXd x = Eigen::VectorXd::Zero(6);
-    x[0] = position(t);
-    x[3] = velocity(t);
-    return State(t, x);
-  }
-  // Largest deviation of (x, x') from the closed form.
-  double error(const State& s) const { return (s.x - exact(s.t).x).lpNorm<Eigen::Infinity>(); }
-};
-
-IntegratorSettings fixed(double h, bool estimate = false) {
-  IntegratorSettings s;
-  s.fixed_step = true;
-  s.max_step = h;
-  s.error_estimate = estimate;
-  return s;
-}
 
 IntegratorSettings controlled(double accuracy, double max_step) {
   IntegratorSettings s;
   s.max_step = max_step;
   s.accuracy = accuracy;
   return s;
-}
-
-std::unique_ptr<ParticleSystem> cloth(int n, double k_stretch) {
-  ClothSpec spec;
-  spec.nx = spec.ny = n;
-  spec.total_mass = 0.4;
-  spec.stretch = SpringParameters{k_stretch, 0.5};
-  spec.shear = SpringParameters{100.0, 0.1};
-  spec.bend = SpringParameters{10.0, 0.05};
-  return std::make_unique<ParticleSystem>(make_cloth(spec));
 }
 
 // A scalar first-order ODE z' = f(t, z) as a System (nq = nv = 0, nz = 1):
@@ -119,17 +65,6 @@ class ScalarOde : public System {
   ForceJacobians pattern_;
   SparseMatrix mass_;
 };
-
-double fitted_slope(const std::vector<double>& h, const std::vector<double>& e) {
-  // Least-squares slope of log e against log h.
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  const double n = h.size();
-  for (size_t i = 0; i < h.size(); ++i) {
-    const double x = std::log(h[i]), y = std::log(e[i]);
-    sx += x, sy += y, sxx += x * x, sxy += x * y;
-  }
-  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
-}
 
 template <class Integrator>
 double max_global_error(const SpringDamper& sd, const System& sys, double h, double t_final) {

@@ -17,7 +17,7 @@ namespace stiffsim {
 namespace {
 
 // One particle of mass m on a spring (k, c) to a pinned anchor, along x, no
-// gravity: m x'' = -k (x - L) - c x'.
+// gravity: m x'' = -k (x - L) - c x'. State: q = (x, 0, 0), v = (x', 0, 0).
 struct SpringDamper {
   double m = 1.0, k = 100.0, c = 2.0, L = 1.0, x0 = 1.2;
   std::unique_ptr<ParticleSystem> system() const {
@@ -30,14 +30,27 @@ struct SpringDamper {
     d.gravity.setZero();
     return std::make_unique<ParticleSystem>(d);
   }
+  double zeta() const { return c / (2 * std::sqrt(k * m)); }
+  double w0() const { return std::sqrt(k / m); }
+  double wd() const { return w0() * std::sqrt(1 - zeta() * zeta()); }
   // Underdamped closed form of the displacement u = x - L from u0, u'(0) = 0.
   double position(double t) const {
-    const double zeta = c / (2 * std::sqrt(k * m)), w0 = std::sqrt(k / m);
-    const double wd = w0 * std::sqrt(1 - zeta * zeta);
-    const double u0 = x0 - L;
-    return L + std::exp(-zeta * w0 * t) *
-                   (u0 * std::cos(wd * t) + u0 * zeta * w0 / wd * std::sin(wd * t));
+    const double u0 = x0 - L, a = zeta() * w0();
+    return L + std::exp(-a * t) * (u0 * std::cos(wd() * t) + u0 * a / wd() * std::sin(wd() * t));
   }
+  double velocity(double t) const {
+    const double u0 = x0 - L, a = zeta() * w0();
+    return -u0 * w0() * w0() / wd() * std::exp(-a * t) * std::sin(wd() * t);
+  }
+  // The exact state (q, v) at t.
+  State exact(double t) const {
+    Eigen::VectorXd x = Eigen::VectorXd::Zero(6);
+    x[0] = position(t);
+    x[3] = velocity(t);
+    return State(t, x);
+  }
+  // Largest deviation of (x, x') from the closed form.
+  double error(const State& s) const { return (s.x - exact(s.t).x).lpNorm<Eigen::Infinity>(); }
 };
 
 [[maybe_unused]] IntegratorSettings fixed(double h, bool estimate = false, double accuracy = 1e-10) {

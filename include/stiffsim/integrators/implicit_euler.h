@@ -58,7 +58,7 @@ class ImplicitEuler : public ImplicitIntegrator {
   std::vector<int> slots_N_, slots_M_, slots_K_, slots_D_, slots_Fz_, slots_Zq_, slots_Zv_,
       slots_Zz_;
   std::vector<int> diagonal_slots_;
-  Eigen::VectorXd x_ie_, x_trap_, linearization_, qdot_, F_, zdot_, dv_;
+  Eigen::VectorXd x_ie_, x_trap_, qdot_, F_, zdot_, dv_;
 };
 
 }  // namespace stiffsim

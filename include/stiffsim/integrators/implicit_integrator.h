@@ -135,6 +135,11 @@ class ImplicitIntegrator : public IntegratorBase {
   // Adds the work done since `before` to the error_estimator_* counters.
   static void add_estimator_share(const IntegratorStatistics& before, IntegratorStatistics* stats);
 
+  // Force Jacobians at the predicted state (q + h N(q) v, v, z): linearized
+  // where the step is heading, as Drake's VIE does (a flat cloth at rest has
+  // no transverse stiffness at x itself). The point is left in
+  // linearization_.
+  void compute_force_jacobians_ahead(double t, const Eigen::VectorXd& x, double h);
   // Evaluates dF/dq, dF/dv, ... at (t, x) into jacobians_ by the configured
   // scheme, counting jacobian_evaluations and the derivative evaluations it
   // used.
@@ -164,6 +169,7 @@ class ImplicitIntegrator : public IntegratorBase {
   ForceJacobians jacobians_;
   bool jacobians_valid_ = false;
   Eigen::VectorXd x_big_, x_half_, x_small_;
+  Eigen::VectorXd linearization_;  // where compute_force_jacobians_ahead() linearized
 
  private:
   // The refresh ladder: kSkip when the rung would rebuild the matrix that
@@ -199,7 +205,7 @@ class ImplicitIntegrator : public IntegratorBase {
   bool guard_energy_ = false;
   bool energy_guard_suspended_ = false;
   State energy_state_;
-  Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_;
+  Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_;
 };
 
 }  // namespace stiffsim
