@@ -1,0 +1,150 @@
+#pragma once
+// Articulated rigid bodies (MODELS.md "Articulated bodies from URDF") as a
+// System, in either formulation:
+// - exact: the RigidTree in reduced coordinates. M(q) by the composite rigid
+//   body algorithm, which touches only the pairs of bodies on one branch (the
+//   tree's branch sparsity is M's pattern); F = tau_joint - C(q, v) - g(q) by
+//   the recursive Newton-Euler algorithm.
+// - compliant (make_compliant in compliant.h): a forest of free bodies, each
+//   with a floating joint to the world, held together by Bushings; M is block
+//   diagonal and K, D are block tridiagonal for a chain.
+// Both are templated on the scalar: force_jacobians() differentiates F
+// exactly by forward-mode automatic differentiation, seeded by a colouring of
+// the Jacobian pattern, so a chain of free bodies costs a few passes of F
+// whatever its length, and a dense exact tree about (nq + nv) / 16 passes.
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "stiffsim/model/rigid_tree.h"
+#include "stiffsim/model/spatial.h"
+#include "stiffsim/system.h"
+
+namespace stiffsim {
+
+// A joint spring tau = -stiffness (q - rest) and viscous damping
+// tau = -damping q_dot on a 1-DOF joint (revolute, prismatic), beside the
+// URDF's own <dynamics damping>.
+struct JointForce {
+  double stiffness = 0.0;
+  double rest = 0.0;
+  double damping = 0.0;
+};
+
+// A stiff spring-damper that replaces a URDF joint in the compliant
+// formulation. It pulls the frame of body `child` onto the joint frame
+// (`placement` on body `parent`, -1 the world) in every direction the joint
+// forbids and leaves the joint's own motion free:
+//   linear:  E = k_lin/2 d^T P d, d the child origin relative to the joint
+//            origin, P = I (revolute), I - n n^T (prismatic), n n^T (planar);
+//   angular: E = k_ang (1 - n_joint . n_child) (revolute, planar: the axis
+//            may not tilt), E = k_ang/2 (3 - tr(R_child R_joint^T))
+//            (prismatic: no relative rotation);
+// damping c_lin P and c_ang on the relative velocities at the joint, so it
+// only dissipates. `joint` adds the joint spring and damping on the free
+// coordinate of a 1-DOF joint: the angle atan2 between the joint frame's and
+// the child's reference directions (in (-pi, pi]) or the offset n . d.
+struct Bushing {
+  std::string name;  // the URDF joint
+  int parent = -1;
+  int child = 0;
+  JointType type = JointType::kRevolute;
+  Eigen::Isometry3d placement = Eigen::Isometry3d::Identity();
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
+  double k_lin = 0.0, c_lin = 0.0, k_ang = 0.0, c_ang = 0.0;
+  JointForce joint;  // damping: the URDF's plus the scene's
+};
+
+struct ArticulatedOptions {
+  Eigen::Vector3d gravity{0.0, 0.0, -9.81};
+  // Per body of the tree (empty: none). Only 1-DOF joints take a spring;
+  // damping is added to the URDF's.
+  std::vector<JointForce> joint_forces;
+  // Compliant formulation only: every body a bushing touches must be a free
+  // root (parent -1, floating, identity placement).
+  std::vector<Bushing> bushings;
+  // The initial state (sizes nq and nv); empty: every joint at 0, identity
+  // quaternions, at rest.
+  Eigen::VectorXd initial_q, initial_v;
+  std::string formulation = "exact";  // for the name in reports: exact | compliant
+};
+
+class ArticulatedSystem : public System {
+ public:
+  // Validates the tree and options; throws InputError naming the component.
+  ArticulatedSystem(RigidTree tree, ArticulatedOptions options);
+
+  Dimensions dimensions() const override { return dims_; }
+  Capabilities capabilities() const override;
+  std::string name() const override { return tree_.name; }
+  State initial_state() const override;
+  std::vector<std::string> position_names() const override;
+  std::vector<std::string> velocity_names() const override;
+
+  void map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
+                            VectorRef qdot) const override;
+  const SparseMatrix& velocity_map_pattern() const override { return velocity_map_pattern_; }
+  void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const override;
+  bool project_positions(VectorRef q) const override;
+
+  const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
+  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
+              VectorRef F) const override;
+  const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
+  // Exact K and D (complete: nothing dropped, request ignored), by the same
+  // seeded forward-mode differentiation as automatic_force_jacobians.
+  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                       const ConstVectorRef& z, const JacobianRequest& request,
+                       ForceJacobians* J) const override;
+  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                 const ConstVectorRef& z, const JacobianRequest& request,
+                                 ForceJacobians* J) const override;
+  double energy(const State& s) const override;
+
+  // --- For reports and tests. ---
+  const RigidTree& tree() const { return tree_; }
+  const ArticulatedOptions& options() const { return options_; }
+  int body_q_offset(int body) const { return q_offset_[body]; }
+  int body_v_offset(int body) const { return v_offset_[body]; }
+  // Poses of every body in the world.
+  std::vector<Pose<double>> world_poses(const Eigen::VectorXd& q) const;
+  // Spatial velocity of every body in its own coordinates.
+  std::vector<Vec6<double>> body_velocities(const Eigen::VectorXd& q,
+                                            const Eigen::VectorXd& v) const;
+  // Total momentum in the world frame: angular about the world origin, then
+  // linear.
+  Vec6<double> world_momentum(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const;
+  // Kinetic energy alone.
+  double kinetic_energy(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const;
+  // The free coordinate of bushing k (its joint angle or offset, as the
+  // joint spring sees it).
+  double bushing_coordinate(int k, const Eigen::VectorXd& q) const;
+  // Passes of F per Jacobian (colours / lanes, rounded up).
+  int jacobian_passes() const { return jacobian_passes_; }
+
+  template <typename T>
+  void evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
+                       const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
+                       Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const;
+
+ private:
+  void exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v, ForceJacobians* J) const;
+
+  RigidTree tree_;
+  ArticulatedOptions options_;
+  Dimensions dims_;
+  std::vector<int> q_offset_, v_offset_;
+  std::vector<SpatialInertia> inertia_;
+  bool has_floating_ = false;
+  SparseMatrix mass_pattern_, velocity_map_pattern_;
+  // Value slots of M in the order the composite rigid body algorithm
+  // produces its blocks (see mass_matrix()).
+  std::vector<int> mass_slots_;
+  ForceJacobians jacobian_pattern_;
+  std::vector<int> column_colour_;  // over (q, v)
+  int colours_ = 0, jacobian_passes_ = 0;
+};
+
+}  // namespace stiffsim

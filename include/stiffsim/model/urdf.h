@@ -1,0 +1,37 @@
+#pragma once
+// URDF files read with urdfdom into a RigidTree (MODELS.md): links, inertials,
+// joints (revolute, continuous, prismatic, fixed, floating, planar), joint
+// damping. Fixed joints weld their child into the parent exactly (mass, COM
+// and inertia combined). What does not affect the dynamics (visual and
+// collision geometry, materials, transmissions, gazebo blocks, joint limits,
+// mimic joints, friction) is ignored and said once per file in `notes`.
+
+#include <string>
+#include <vector>
+
+#include "stiffsim/model/rigid_tree.h"
+
+namespace stiffsim {
+
+struct UrdfOptions {
+  std::string component_name;  // RigidTree::name; the robot name when empty
+  bool floating_base = false;  // a floating joint "floating_base" between world and root
+};
+
+// Reads `path`. Throws InputError naming the file and the element (link or
+// joint) for: a missing or unreadable file, broken XML, what urdfdom rejects
+// (its message passed on), a cycle or several roots, a joint type outside
+// the supported set, a zero axis, a non-finite number, a negative mass, an
+// inertia tensor that is not symmetric positive definite (about the COM; zero
+// only for a massless link), and a moving subtree without mass (a link that
+// must move but whose subtree carries no mass or no rotational inertia makes
+// M singular). `notes` (may be null) receives one line per file listing what
+// was ignored.
+RigidTree load_urdf(const std::string& path, const UrdfOptions& options,
+                    std::vector<std::string>* notes);
+
+// The same from text in memory; `source_name` names it in messages.
+RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
+                     const UrdfOptions& options, std::vector<std::string>* notes);
+
+}  // namespace stiffsim

@@ -1,0 +1,672 @@
+#include "stiffsim/model/articulated.h"
+
+#include <unsupported/Eigen/AutoDiff>
+#include <cmath>
+#include <sstream>
+
+#include "stiffsim/error.h"
+#include "stiffsim/linalg/column_colouring.h"
+#include "stiffsim/model/joints.h"
+#include "stiffsim/model/quaternion.h"
+
+namespace stiffsim {
+namespace {
+
+// Derivative lanes per pass of the seeded forward-mode differentiation: a
+// free body has 13 columns (7 q, 6 v) and a chain's colouring 3 x 13 = 39, so
+// 16 lanes take three passes; a wider vector would cost every operation of
+// every pass more.
+constexpr int kLanes = 16;
+using Dual = Eigen::AutoDiffScalar<Eigen::Matrix<double, kLanes, 1>>;
+
+template <typename T>
+using VecX = Eigen::Matrix<T, Eigen::Dynamic, 1>;
+
+std::string where(const RigidTree& tree) { return "component '" + tree.name + "'"; }
+
+// World pose and world velocities (of the origin, and angular) of a free root
+// body from its q and v slices.
+template <typename T>
+struct FreeBodyState {
+  Pose<T> pose;
+  Vec3<T> velocity, omega;  // world frame
+};
+
+template <typename T>
+FreeBodyState<T> free_body_state(const VecX<T>& q, const VecX<T>& v, int qo, int vo) {
+  FreeBodyState<T> s;
+  Eigen::Matrix<T, 4, 1> quat = q.template segment<4>(qo + 3);
+  s.pose.R = quaternion_rotation<T>(quat);
+  s.pose.p = q.template segment<3>(qo);
+  s.velocity = v.template segment<3>(vo);
+  s.omega = s.pose.R * Vec3<T>(v.template segment<3>(vo + 3));
+  return s;
+}
+
+// Adds a world force f at world point x and a world moment m on a free root
+// body to its generalized forces (linear velocity in the world, angular in
+// the body frame).
+template <typename T>
+void apply_wrench(const FreeBodyState<T>& s, const Vec3<T>& x, const Vec3<T>& f, const Vec3<T>& m,
+                  int vo, VecX<T>* F) {
+  F->template segment<3>(vo) += f;
+  const Vec3<T> arm = x - s.pose.p;
+  F->template segment<3>(vo + 3) += s.pose.R.transpose() * (arm.cross(f) + m);
+}
+
+// A unit direction perpendicular to the unit axis n, for joint angles.
+Eigen::Vector3d reference_direction(const Eigen::Vector3d& n) {
+  Eigen::Vector3d e1, e2;
+  planar_basis(n, &e1, &e2);
+  return e1;
+}
+
+struct BushingGeometry {
+  double alpha = 1.0, beta = 0.0;  // P = alpha I + beta n n^T
+  bool tilt_only = true;           // angular: axis alignment (else full lock)
+};
+
+BushingGeometry bushing_geometry(JointType type) {
+  switch (type) {
+    case JointType::kRevolute: return {1.0, 0.0, true};
+    case JointType::kPrismatic: return {1.0, -1.0, false};
+    case JointType::kPlanar: return {0.0, 1.0, true};
+    case JointType::kFloating: break;
+  }
+  return {0.0, 0.0, true};
+}
+
+// The relative state of a bushing's two frames.
+template <typename T>
+struct BushingFrames {
+  FreeBodyState<T> a, b;  // a: the parent (the world at rest when parent < 0)
+  Mat3<T> RJ;             // joint frame orientation in the world
+  Vec3<T> xJ;             // joint frame origin in the world
+  Vec3<T> n;              // joint axis in the world (fixed to the parent)
+};
+
+template <typename T>
+BushingFrames<T> bushing_frames(const Bushing& bu, const VecX<T>& q, const VecX<T>& v,
+                                const std::vector<int>& qo, const std::vector<int>& vo) {
+  BushingFrames<T> fr;
+  if (bu.parent >= 0) {
+    fr.a = free_body_state<T>(q, v, qo[bu.parent], vo[bu.parent]);
+  } else {
+    fr.a.velocity.setZero();
+    fr.a.omega.setZero();
+  }
+  fr.b = free_body_state<T>(q, v, qo[bu.child], vo[bu.child]);
+  fr.RJ = fr.a.pose.R * bu.placement.linear().cast<T>();
+  fr.xJ = fr.a.pose.p + fr.a.pose.R * bu.placement.translation().cast<T>();
+  fr.n = fr.RJ * bu.axis.cast<T>();
+  return fr;
+}
+
+template <typename T>
+T bushing_angle(const Bushing& bu, const BushingFrames<T>& fr, Vec3<T>* gradient_child) {
+  using std::atan2;
+  const Eigen::Vector3d e = reference_direction(bu.axis);
+  const Vec3<T> ea = fr.RJ * e.cast<T>();
+  const Vec3<T> eb = fr.b.pose.R * e.cast<T>();
+  const T x = ea.dot(eb);
+  const T y = fr.n.dot(ea.cross(eb));
+  if (gradient_child) {
+    // d theta / d phi_child for a small world rotation phi of the child; the
+    // parent's is its negative (theta is invariant under a common rotation).
+    const Vec3<T> dx = eb.cross(ea);
+    const Vec3<T> dy = eb.cross(Vec3<T>(fr.n.cross(ea)));
+    *gradient_child = (x * dy - y * dx) / (x * x + y * y);
+  }
+  return atan2(y, x);
+}
+
+// Adds bushing `bu`'s generalized forces to F.
+template <typename T>
+void add_bushing_forces(const Bushing& bu, const VecX<T>& q, const VecX<T>& v,
+                        const std::vector<int>& qo, const std::vector<int>& vo, VecX<T>* F) {
+  const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, qo, vo);
+  const BushingGeometry g = bushing_geometry(bu.type);
+  const Vec3<T>& n = fr.n;
+  const Vec3<T> d = fr.b.pose.p - fr.xJ;
+  const T nd = n.dot(d);
+  // Relative velocities at the joint: of the child origin against the parent
+  // point under it, and angular.
+  const Vec3<T> dv = fr.b.velocity - (fr.a.velocity + fr.a.omega.cross(Vec3<T>(fr.b.pose.p - fr.a.pose.p)));
+  const Vec3<T> dw = fr.b.omega - fr.a.omega;
+
+  // Linear: the child's force at its origin (the parent takes the opposite
+  // at the same point, which lies on both bodies' lines of action, plus the
+  // moment from the axis it carries).
+  Vec3<T> f = -T(bu.k_lin) * (T(g.alpha) * d + T(g.beta) * nd * n) -
+              T(bu.c_lin) * (T(g.alpha) * dv + T(g.beta) * n.dot(dv) * n);
+  Vec3<T> m_parent = -T(bu.k_lin * g.beta) * nd * n.cross(d);
+  Vec3<T> m_child = Vec3<T>::Zero();
+
+  // Angular.
+  if (g.tilt_only) {
+    const Vec3<T> nb = fr.b.pose.R * bu.axis.cast<T>();
+    m_child += T(bu.k_ang) * nb.cross(n);
+    m_parent += T(bu.k_ang) * n.cross(nb);
+    const Vec3<T> dw_perp = dw - n.dot(dw) * n;
+    m_child -= T(bu.c_ang) * dw_perp;
+    m_parent += T(bu.c_ang) * dw_perp;
+  } else {
+    const Mat3<T> S = fr.b.pose.R * fr.RJ.transpose();
+    Vec3<T> axial;
+    axial << S(2, 1) - S(1, 2), S(0, 2) - S(2, 0), S(1, 0) - S(0, 1);
+    m_child -= T(0.5 * bu.k_ang) * axial;
+    m_parent += T(0.5 * bu.k_ang) * axial;
+    m_child -= T(bu.c_ang) * dw;
+    m_parent += T(bu.c_ang) * dw;
+  }
+
+  // The free coordinate's spring and damper.
+  const JointForce& jf = bu.joint;
+  if (bu.type == JointType::kRevolute && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
+    Vec3<T> grad;
+    const T theta = bushing_angle<T>(bu, fr, &grad);
+    const T torque = -T(jf.stiffness) * (theta - T(jf.rest));
+    m_child += torque * grad;
+    m_parent -= torque * grad;
+    const Vec3<T> damp = -T(jf.damping) * n.dot(dw) * n;
+    m_child += damp;
+    m_parent -= damp;
+  } else if (bu.type == JointType::kPrismatic && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
+    const T s_force = -T(jf.stiffness) * (nd - T(jf.rest));
+    f += s_force * n - T(jf.damping) * n.dot(dv) * n;
+    // E = k/2 (n.d - rest)^2 also turns with the parent's axis.
+    m_parent += s_force * n.cross(d);
+  }
+
+  apply_wrench<T>(fr.b, fr.b.pose.p, f, m_child, vo[bu.child], F);
+  if (bu.parent >= 0) {
+    apply_wrench<T>(fr.a, fr.b.pose.p, Vec3<T>(-f), m_parent, vo[bu.parent], F);
+  }
+}
+
+// The potential of bushing `bu` (velocities do not enter it: `rest` is any
+// velocity vector of the right size).
+double bushing_energy(const Bushing& bu, const Eigen::VectorXd& q, const Eigen::VectorXd& rest,
+                      const std::vector<int>& qo, const std::vector<int>& vo) {
+  const BushingFrames<double> fr = bushing_frames<double>(bu, q, rest, qo, vo);
+  const BushingGeometry g = bushing_geometry(bu.type);
+  const Eigen::Vector3d d = fr.b.pose.p - fr.xJ;
+  const double nd = fr.n.dot(d);
+  double e = 0.5 * bu.k_lin * (g.alpha * d.squaredNorm() + g.beta * nd * nd);
+  if (g.tilt_only) {
+    e += bu.k_ang * (1.0 - fr.n.dot(fr.b.pose.R * bu.axis));
+  } else {
+    e += 0.5 * bu.k_ang * (3.0 - (fr.b.pose.R * fr.RJ.transpose()).trace());
+  }
+  if (bu.type == JointType::kRevolute) {
+    const double theta = bushing_angle<double>(bu, fr, nullptr);
+    e += 0.5 * bu.joint.stiffness * (theta - bu.joint.rest) * (theta - bu.joint.rest);
+  } else if (bu.type == JointType::kPrismatic) {
+    e += 0.5 * bu.joint.stiffness * (nd - bu.joint.rest) * (nd - bu.joint.rest);
+  }
+  return e;
+}
+
+bool is_free_root(const TreeBody& b) {
+  return b.parent < 0 && b.type == JointType::kFloating &&
+         b.placement.isApprox(Eigen::Isometry3d::Identity(), 0.0);
+}
+
+}  // namespace
+
+ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
+    : tree_(std::move(tree)), options_(std::move(options)) {
+  const int nb = static_cast<int>(tree_.bodies.size());
+  const std::string w = where(tree_);
+  if (nb == 0) throw InputError(w + ": the URDF has no moving body");
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree_.bodies[i];
+    if (b.parent >= i || b.parent < -1) {
+      throw InputError(w + ": body '" + b.link + "' comes before its parent");
+    }
+    q_offset_.push_back(dims_.nq);
+    v_offset_.push_back(dims_.nv);
+    dims_.nq += joint_nq(b.type);
+    dims_.nv += joint_nv(b.type);
+    has_floating_ |= b.type == JointType::kFloating;
+    SpatialInertia I;
+    I.mass = b.inertia.mass;
+    I.com = b.inertia.com;
+    I.inertia_com = b.inertia.inertia;
+    inertia_.push_back(I);
+  }
+  if (!options_.joint_forces.empty() && static_cast<int>(options_.joint_forces.size()) != nb) {
+    throw InputError(w + ": joint forces given for " + std::to_string(options_.joint_forces.size()) +
+                     " joints; expected " + std::to_string(nb));
+  }
+  for (int i = 0; i < static_cast<int>(options_.joint_forces.size()); ++i) {
+    const JointForce& jf = options_.joint_forces[i];
+    const TreeBody& b = tree_.bodies[i];
+    if (!std::isfinite(jf.stiffness) || !std::isfinite(jf.rest) || !std::isfinite(jf.damping) ||
+        jf.stiffness < 0.0 || jf.damping < 0.0) {
+      throw InputError(w + ": joint '" + b.joint +
+                       "': joint stiffness and damping must be finite and >= 0");
+    }
+    if (joint_nv(b.type) != 1 && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
+      throw InputError(w + ": joint '" + b.joint + "' is " + joint_type_name(b.type) +
+                       "; joint springs and dampers apply to 1-DOF joints only");
+    }
+  }
+  for (const Bushing& bu : options_.bushings) {
+    for (int body : {bu.parent, bu.child}) {
+      if (body < -1 || body >= nb || (body >= 0 && !is_free_root(tree_.bodies[body])) ||
+          bu.child < 0) {
+        throw InputError(w + ": bushing '" + bu.name + "' must join free bodies");
+      }
+    }
+    if (bu.type == JointType::kFloating) {
+      throw InputError(w + ": bushing '" + bu.name + "' replaces a floating joint");
+    }
+  }
+  if (options_.initial_q.size() == 0) {
+    options_.initial_q = Eigen::VectorXd::Zero(dims_.nq);
+    for (int i = 0; i < nb; ++i) {
+      if (tree_.bodies[i].type == JointType::kFloating) options_.initial_q[q_offset_[i] + 3] = 1.0;
+    }
+  }
+  if (options_.initial_v.size() == 0) options_.initial_v = Eigen::VectorXd::Zero(dims_.nv);
+  if (options_.initial_q.size() != dims_.nq || options_.initial_v.size() != dims_.nv ||
+      !options_.initial_q.allFinite() || !options_.initial_v.allFinite()) {
+    throw InputError(w + ": the initial state needs " + std::to_string(dims_.nq) + " positions and " +
+                     std::to_string(dims_.nv) + " velocities, all finite");
+  }
+  for (int i = 0; i < nb; ++i) {
+    if (tree_.bodies[i].type != JointType::kFloating) continue;
+    auto quat = options_.initial_q.segment<4>(q_offset_[i] + 3);
+    if (quat.norm() < 1e-12) {
+      throw InputError(w + ": joint '" + tree_.bodies[i].joint + "': the initial quaternion is zero");
+    }
+    quat.normalize();
+  }
+
+  // Bodies are related when one lies on the other's path to the root; only
+  // related bodies share entries of M (branch sparsity), and so, through the
+  // Newton-Euler recursion, of K and D. Bushings relate the bodies they join
+  // (and the branches above them).
+  std::vector<std::vector<int>> related(nb);
+  for (int i = 0; i < nb; ++i) {
+    for (int j = i; j >= 0; j = tree_.bodies[j].parent) related[i].push_back(j);
+  }
+  PatternBuilder M(dims_.nv, dims_.nv), K(dims_.nv, dims_.nq), D(dims_.nv, dims_.nv);
+  auto add_block = [&](PatternBuilder& P, int row0, int rows, int col0, int cols) {
+    for (int r = 0; r < rows; ++r)
+      for (int c = 0; c < cols; ++c) P.add(row0 + r, col0 + c);
+  };
+  auto add_pair = [&](int i, int j) {
+    const int ni = joint_nv(tree_.bodies[i].type), nj = joint_nv(tree_.bodies[j].type);
+    for (auto [a, b] : {std::pair{i, j}, std::pair{j, i}}) {
+      const int na = joint_nv(tree_.bodies[a].type);
+      add_block(K, v_offset_[a], na, q_offset_[b], joint_nq(tree_.bodies[b].type));
+      add_block(D, v_offset_[a], na, v_offset_[b], joint_nv(tree_.bodies[b].type));
+    }
+    (void)ni, (void)nj;
+  };
+  for (int i = 0; i < nb; ++i) {
+    for (int j : related[i]) {
+      add_pair(i, j);
+      const int ni = joint_nv(tree_.bodies[i].type), nj = joint_nv(tree_.bodies[j].type);
+      add_block(M, v_offset_[i], ni, v_offset_[j], nj);
+      add_block(M, v_offset_[j], nj, v_offset_[i], ni);
+    }
+  }
+  for (const Bushing& bu : options_.bushings) {
+    if (bu.parent >= 0) add_pair(bu.parent, bu.child);
+    add_pair(bu.child, bu.child);
+  }
+  mass_pattern_ = M.build();
+  jacobian_pattern_ = empty_jacobians(dims_);
+  jacobian_pattern_.dF_dq = K.build();
+  jacobian_pattern_.dF_dv = D.build();
+
+  // The slots of M's entries in the order mass_matrix() writes them.
+  for (int i = 0; i < nb; ++i) {
+    const int ni = joint_nv(tree_.bodies[i].type);
+    for (int j : related[i]) {
+      const int nj = joint_nv(tree_.bodies[j].type);
+      for (int a = 0; a < nj; ++a) {
+        for (int b = 0; b < ni; ++b) {
+          mass_slots_.push_back(slot_of(mass_pattern_, v_offset_[j] + a, v_offset_[i] + b));
+          mass_slots_.push_back(slot_of(mass_pattern_, v_offset_[i] + b, v_offset_[j] + a));
+        }
+      }
+    }
+  }
+
+  PatternBuilder Np(dims_.nq, dims_.nv);
+  for (int i = 0; i < nb; ++i) {
+    const int qo = q_offset_[i], vo = v_offset_[i];
+    if (tree_.bodies[i].type == JointType::kFloating) {
+      for (int k = 0; k < 3; ++k) Np.add(qo + k, vo + k);
+      for (int r = 3; r < 7; ++r)
+        for (int c = 3; c < 6; ++c) Np.add(qo + r, vo + c);
+    } else {
+      for (int k = 0; k < joint_nv(tree_.bodies[i].type); ++k) Np.add(qo + k, vo + k);
+    }
+  }
+  velocity_map_pattern_ = Np.build();
+
+  const ColumnColouring colouring = colour_columns(
+      dims_.nv, dims_.nq + dims_.nv,
+      {PatternBlock{&jacobian_pattern_.dF_dq, 0, 0}, PatternBlock{&jacobian_pattern_.dF_dv, 0, dims_.nq}});
+  column_colour_ = colouring.colour;
+  colours_ = colouring.colours;
+  jacobian_passes_ = (colours_ + kLanes - 1) / kLanes;
+}
+
+Capabilities ArticulatedSystem::capabilities() const {
+  Capabilities c;
+  c.identity_velocity_map = !has_floating_;
+  c.has_quaternions = has_floating_;
+  c.analytic_jacobians = true;
+  c.automatic_jacobians = true;
+  c.has_energy = true;
+  c.passive = true;
+  return c;
+}
+
+State ArticulatedSystem::initial_state() const {
+  State s;
+  s.x.resize(dims_.nx());
+  s.x << options_.initial_q, options_.initial_v;
+  return s;
+}
+
+std::vector<std::string> ArticulatedSystem::position_names() const {
+  std::vector<std::string> names;
+  for (const TreeBody& b : tree_.bodies) {
+    const std::string base = tree_.name + "/" + b.joint;
+    switch (b.type) {
+      case JointType::kFloating:
+        for (const char* s : {"x", "y", "z", "qw", "qx", "qy", "qz"}) names.push_back(base + "/" + s);
+        break;
+      case JointType::kPlanar:
+        for (const char* s : {"x", "y", "theta"}) names.push_back(base + "/" + s);
+        break;
+      default:
+        names.push_back(base);
+    }
+  }
+  return names;
+}
+
+std::vector<std::string> ArticulatedSystem::velocity_names() const {
+  std::vector<std::string> names;
+  for (const TreeBody& b : tree_.bodies) {
+    const std::string base = tree_.name + "/" + b.joint;
+    switch (b.type) {
+      case JointType::kFloating:
+        for (const char* s : {"vx", "vy", "vz", "wx", "wy", "wz"}) names.push_back(base + "/" + s);
+        break;
+      case JointType::kPlanar:
+        for (const char* s : {"vx", "vy", "w"}) names.push_back(base + "/" + s);
+        break;
+      default:
+        names.push_back(base);
+    }
+  }
+  return names;
+}
+
+void ArticulatedSystem::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
+                                             VectorRef qdot) const {
+  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
+    const int qo = q_offset_[i], vo = v_offset_[i];
+    if (tree_.bodies[i].type == JointType::kFloating) {
+      qdot.segment<3>(qo) = v.segment<3>(vo);
+      qdot.segment<4>(qo + 3) = quaternion_rate_map(q.segment<4>(qo + 3)) * v.segment<3>(vo + 3);
+    } else {
+      const int n = joint_nv(tree_.bodies[i].type);
+      qdot.segment(qo, n) = v.segment(vo, n);
+    }
+  }
+}
+
+void ArticulatedSystem::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
+  // Column-major storage: fill column by column in the pattern's own order.
+  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
+    const int qo = q_offset_[i], vo = v_offset_[i];
+    if (tree_.bodies[i].type == JointType::kFloating) {
+      for (int k = 0; k < 3; ++k) N->coeffRef(qo + k, vo + k) = 1.0;
+      const Eigen::Matrix<double, 4, 3> G = quaternion_rate_map(q.segment<4>(qo + 3));
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 3; ++c) N->coeffRef(qo + 3 + r, vo + 3 + c) = G(r, c);
+    } else {
+      for (int k = 0; k < joint_nv(tree_.bodies[i].type); ++k) N->coeffRef(qo + k, vo + k) = 1.0;
+    }
+  }
+}
+
+bool ArticulatedSystem::project_positions(VectorRef q) const {
+  bool changed = false;
+  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
+    if (tree_.bodies[i].type != JointType::kFloating) continue;
+    auto quat = q.segment<4>(q_offset_[i] + 3);
+    const double n = quat.norm();
+    if (n > 0.0 && n != 1.0) {
+      quat /= n;
+      changed = true;
+    }
+  }
+  return changed;
+}
+
+void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
+  // Composite rigid body algorithm: the inertia of every subtree in its root
+  // body's frame, then M_ji = S_j^T X^T ... X^T Ic_i S_i along the path from i
+  // to the root. Only related pairs are visited: the tree's branch sparsity.
+  const int nb = static_cast<int>(tree_.bodies.size());
+  std::vector<Eigen::Matrix<double, 6, 6>> Ic(nb), X(nb);
+  std::vector<MotionSubspace<double>> S(nb);
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree_.bodies[i];
+    const JointMotion<double> jm = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type)));
+    S[i] = jm.S;
+    X[i] = motion_transform_matrix(jm.pose);
+    Ic[i] = inertia_[i].matrix();
+  }
+  for (int i = nb - 1; i >= 0; --i) {
+    const int p = tree_.bodies[i].parent;
+    if (p >= 0) Ic[p] += X[i].transpose() * Ic[i] * X[i];
+  }
+  double* values = M->valuePtr();
+  std::size_t slot = 0;
+  Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, 6> Fm;
+  for (int i = 0; i < nb; ++i) {
+    Fm = Ic[i] * S[i];
+    for (int j = i;;) {
+      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6> block = S[j].transpose() * Fm;
+      for (int a = 0; a < block.rows(); ++a) {
+        for (int b = 0; b < block.cols(); ++b) {
+          values[mass_slots_[slot++]] = block(a, b);
+          values[mass_slots_[slot++]] = block(a, b);
+        }
+      }
+      const int p = tree_.bodies[j].parent;
+      if (p < 0) break;
+      Fm = X[j].transpose() * Fm;
+      j = p;
+    }
+  }
+}
+
+template <typename T>
+void ArticulatedSystem::evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
+                                        const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
+                                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const {
+  // Recursive Newton-Euler with zero joint accelerations: tau = C(q, v) + g(q)
+  // (gravity as an upward acceleration of the world), F = -tau + joint forces.
+  const int nb = static_cast<int>(tree_.bodies.size());
+  std::vector<Pose<T>> pose(nb);
+  std::vector<MotionSubspace<T>> S(nb);
+  std::vector<Vec6<T>> V(nb), A(nb), f(nb);
+  Vec6<T> a_world;
+  a_world << T(0.0), T(0.0), T(0.0), T(-options_.gravity.x()), T(-options_.gravity.y()),
+      T(-options_.gravity.z());
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree_.bodies[i];
+    const int nv = joint_nv(b.type);
+    const JointMotion<T> jm = joint_motion<T>(b, q.segment(q_offset_[i], joint_nq(b.type)));
+    pose[i] = jm.pose;
+    S[i] = jm.S;
+    const Vec6<T> vJ = jm.S * v.segment(v_offset_[i], nv);
+    const Vec6<T> cJ = joint_velocity_product<T>(vJ);
+    if (b.parent < 0) {
+      V[i] = vJ;
+      A[i] = motion_to_child<T>(pose[i], a_world) + cJ;
+    } else {
+      V[i] = motion_to_child<T>(pose[i], V[b.parent]) + vJ;
+      A[i] = motion_to_child<T>(pose[i], A[b.parent]) + cJ + cross_motion<T>(V[i], vJ);
+    }
+    f[i] = inertia_[i].apply<T>(A[i]) + cross_force<T>(V[i], inertia_[i].apply<T>(V[i]));
+  }
+  F->resize(dims_.nv);
+  for (int i = nb - 1; i >= 0; --i) {
+    const TreeBody& b = tree_.bodies[i];
+    const int nv = joint_nv(b.type);
+    F->segment(v_offset_[i], nv) = -(S[i].transpose() * f[i]);
+    if (b.parent >= 0) f[b.parent] += force_to_parent<T>(pose[i], f[i]);
+    if (nv == 1) {
+      const double damping = b.damping + (options_.joint_forces.empty() ? 0.0 : options_.joint_forces[i].damping);
+      T& Fi = (*F)[v_offset_[i]];
+      Fi -= T(damping) * v[v_offset_[i]];
+      if (!options_.joint_forces.empty() && options_.joint_forces[i].stiffness != 0.0) {
+        const JointForce& jf = options_.joint_forces[i];
+        Fi -= T(jf.stiffness) * (q[q_offset_[i]] - T(jf.rest));
+      }
+    }
+  }
+  for (const Bushing& bu : options_.bushings) add_bushing_forces<T>(bu, q, v, q_offset_, v_offset_, F);
+}
+
+void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                               const ConstVectorRef& z, VectorRef F) const {
+  (void)t, (void)z;
+  Eigen::VectorXd out;
+  evaluate_forces<double>(q, v, &out);
+  F = out;
+}
+
+void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v,
+                                        ForceJacobians* J) const {
+  // Seeded forward mode: the columns of one colour share no row of [K D], so
+  // they can share a derivative lane; each pass carries kLanes colours.
+  const int nq = dims_.nq, nv = dims_.nv;
+  VecX<Dual> qd(nq), vd(nv), Fd;
+  SparseMatrix& K = J->dF_dq;
+  SparseMatrix& D = J->dF_dv;
+  for (int pass = 0; pass < jacobian_passes_; ++pass) {
+    const int first = pass * kLanes;
+    auto seed = [&](int column, double value, Dual* x) {
+      *x = Dual(value);
+      x->derivatives().setZero();
+      const int lane = column_colour_[column] - first;
+      if (column_colour_[column] >= 0 && lane >= 0 && lane < kLanes) x->derivatives()[lane] = 1.0;
+    };
+    for (int j = 0; j < nq; ++j) seed(j, q[j], &qd[j]);
+    for (int j = 0; j < nv; ++j) seed(nq + j, v[j], &vd[j]);
+    evaluate_forces<Dual>(qd, vd, &Fd);
+    auto store = [&](SparseMatrix& A, int column_offset) {
+      for (int j = 0; j < A.outerSize(); ++j) {
+        const int lane = column_colour_[column_offset + j] - first;
+        if (lane < 0 || lane >= kLanes) continue;
+        for (SparseMatrix::InnerIterator it(A, j); it; ++it) {
+          it.valueRef() = Fd[it.row()].derivatives()[lane];
+        }
+      }
+    };
+    store(K, 0);
+    store(D, nq);
+  }
+  J->approximated_terms = 0;
+}
+
+void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                        const ConstVectorRef& z, const JacobianRequest& request,
+                                        ForceJacobians* J) const {
+  (void)t, (void)z, (void)request;
+  exact_jacobians(q, v, J);
+}
+
+void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
+                                                  const ConstVectorRef& v, const ConstVectorRef& z,
+                                                  const JacobianRequest& request,
+                                                  ForceJacobians* J) const {
+  (void)t, (void)z, (void)request;
+  exact_jacobians(q, v, J);
+}
+
+std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
+  const int nb = static_cast<int>(tree_.bodies.size());
+  std::vector<Pose<double>> world(nb);
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree_.bodies[i];
+    const Pose<double> local = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type))).pose;
+    world[i] = b.parent < 0 ? local : compose(world[b.parent], local);
+  }
+  return world;
+}
+
+std::vector<Vec6<double>> ArticulatedSystem::body_velocities(const Eigen::VectorXd& q,
+                                                             const Eigen::VectorXd& v) const {
+  const int nb = static_cast<int>(tree_.bodies.size());
+  std::vector<Vec6<double>> V(nb);
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree_.bodies[i];
+    const JointMotion<double> jm = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type)));
+    const Vec6<double> vJ = jm.S * v.segment(v_offset_[i], joint_nv(b.type));
+    V[i] = b.parent < 0 ? vJ : Vec6<double>(motion_to_child<double>(jm.pose, V[b.parent]) + vJ);
+  }
+  return V;
+}
+
+Vec6<double> ArticulatedSystem::world_momentum(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const {
+  const std::vector<Pose<double>> world = world_poses(q);
+  const std::vector<Vec6<double>> V = body_velocities(q, v);
+  Vec6<double> total = Vec6<double>::Zero();
+  for (int i = 0; i < static_cast<int>(world.size()); ++i) {
+    total += force_to_parent<double>(world[i], inertia_[i].apply<double>(V[i]));
+  }
+  return total;
+}
+
+double ArticulatedSystem::kinetic_energy(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const {
+  const std::vector<Vec6<double>> V = body_velocities(q, v);
+  double e = 0.0;
+  for (int i = 0; i < static_cast<int>(V.size()); ++i) e += 0.5 * V[i].dot(inertia_[i].apply<double>(V[i]));
+  return e;
+}
+
+double ArticulatedSystem::energy(const State& s) const {
+  const Eigen::VectorXd q = s.q(dims_), v = s.v(dims_);
+  double e = kinetic_energy(q, v);
+  const std::vector<Pose<double>> world = world_poses(q);
+  for (int i = 0; i < static_cast<int>(world.size()); ++i) {
+    e -= inertia_[i].mass * options_.gravity.dot(world[i].R * inertia_[i].com + world[i].p);
+  }
+  for (int i = 0; i < static_cast<int>(options_.joint_forces.size()); ++i) {
+    const JointForce& jf = options_.joint_forces[i];
+    if (joint_nv(tree_.bodies[i].type) != 1 || jf.stiffness == 0.0) continue;
+    const double dq = q[q_offset_[i]] - jf.rest;
+    e += 0.5 * jf.stiffness * dq * dq;
+  }
+  for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, q_offset_, v_offset_);
+  return e;
+}
+
+double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) const {
+  const Bushing& bu = options_.bushings.at(k);
+  const Eigen::VectorXd v = Eigen::VectorXd::Zero(dims_.nv);
+  const BushingFrames<double> fr = bushing_frames<double>(bu, q, v, q_offset_, v_offset_);
+  if (bu.type == JointType::kPrismatic) return fr.n.dot(fr.b.pose.p - fr.xJ);
+  return bushing_angle<double>(bu, fr, nullptr);
+}
+
+template void ArticulatedSystem::evaluate_forces<double>(const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                                         Eigen::VectorXd*) const;
+
+}  // namespace stiffsim

@@ -1,0 +1,70 @@
+#include "stiffsim/model/compliant.h"
+
+#include <cmath>
+
+#include "stiffsim/error.h"
+#include "stiffsim/model/quaternion.h"
+
+namespace stiffsim {
+
+std::unique_ptr<ArticulatedSystem> make_compliant(const RigidTree& tree, const ArticulatedOptions& exact,
+                                                  const BushingParameters& bushing) {
+  for (double x : {bushing.k_lin, bushing.c_lin, bushing.k_ang, bushing.c_ang}) {
+    if (!std::isfinite(x) || x < 0.0) {
+      throw InputError("component '" + tree.name +
+                       "': bushing k_lin, c_lin, k_ang and c_ang must be finite and >= 0");
+    }
+  }
+  // The exact system validates the tree and the initial state, and places the
+  // free bodies.
+  const ArticulatedSystem reduced(tree, exact);
+  const State x0 = reduced.initial_state();
+  const Dimensions d = reduced.dimensions();
+  const Eigen::VectorXd q0 = x0.q(d), v0 = x0.v(d);
+  const std::vector<Pose<double>> world = reduced.world_poses(q0);
+  const std::vector<Vec6<double>> V = reduced.body_velocities(q0, v0);
+
+  const int nb = static_cast<int>(tree.bodies.size());
+  RigidTree forest;
+  forest.name = tree.name;
+  forest.file = tree.file;
+  ArticulatedOptions options;
+  options.gravity = exact.gravity;
+  options.formulation = "compliant";
+  options.initial_q.resize(7 * nb);
+  options.initial_v.resize(6 * nb);
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = tree.bodies[i];
+    TreeBody free;
+    free.link = free.joint = b.link;
+    free.parent = -1;
+    free.type = JointType::kFloating;
+    free.inertia = b.inertia;
+    forest.bodies.push_back(free);
+    options.initial_q.segment<3>(7 * i) = world[i].p;
+    options.initial_q.segment<4>(7 * i + 3) = quaternion_from_rotation(world[i].R);
+    // Body coordinates (w, v_origin) to (world origin velocity, body w).
+    options.initial_v.segment<3>(6 * i) = world[i].R * V[i].tail<3>();
+    options.initial_v.segment<3>(6 * i + 3) = V[i].head<3>();
+    if (b.type == JointType::kFloating) continue;
+    Bushing bu;
+    bu.name = b.joint;
+    bu.parent = b.parent;
+    bu.child = i;
+    bu.type = b.type;
+    bu.placement = b.placement;
+    bu.axis = b.axis;
+    bu.k_lin = bushing.k_lin;
+    bu.c_lin = bushing.c_lin;
+    bu.k_ang = bushing.k_ang;
+    bu.c_ang = bushing.c_ang;
+    if (!exact.joint_forces.empty()) bu.joint = exact.joint_forces[i];
+    bu.joint.damping += b.damping;
+    // The bushing's free coordinate starts at the exact joint's value; the
+    // joint spring's rest stays where the scene put it.
+    options.bushings.push_back(bu);
+  }
+  return std::make_unique<ArticulatedSystem>(std::move(forest), std::move(options));
+}
+
+}  // namespace stiffsim
