@@ -307,6 +307,9 @@ void print_summary(const RunSummary& s, const std::string& source) {
 
 int run_command(const RunOptions& options) {
   SceneConfig config = load_scene(options.scene, options.sets);
+  if (!options.quiet) {
+    for (const std::string& note : config.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
+  }
   apply_options(options, &config);
   const Scene& scene = *config.scene;
   std::unique_ptr<IntegratorBase> integrator =

@@ -253,8 +253,10 @@ void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVecto
     const Dimensions d = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
     ForceJacobians& c = scratch_J_[i];
+    JacobianRequest own = request;
+    if (request.acceleration) own.acceleration = request.acceleration + o.nv;
     ((*components_[i]).*method)(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                                z.segment(o.nz, d.nz), request, &c);
+                                z.segment(o.nz, d.nz), own, &c);
     const Slots& s = slots_[i];
     scatter_add(c.dF_dq, s.dF_dq, 1.0, &J->dF_dq);
     scatter_add(c.dF_dv, s.dF_dv, 1.0, &J->dF_dv);

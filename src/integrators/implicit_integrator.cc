@@ -97,6 +97,18 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   const auto start = WallClock::now();
   JacobianRequest request;
   request.definite = implicit_.definite_iteration_matrix;
+  if (!caps_.constant_mass_matrix && dims_.nv > 0 && iterate_acceleration_) {
+    request.acceleration = inertial_acceleration_.data();
+  } else if (!caps_.constant_mass_matrix && dims_.nv > 0) {
+    // The Newton matrices need d(M(q) dv)/dq beside K (system.h,
+    // JacobianRequest::acceleration); dv ~ h a, predicted by the
+    // acceleration at the linearization point.
+    inertial_F_.resize(dims_.nv);
+    inertial_zdot_.resize(dims_.nz);
+    evaluate_forces(t, x, &inertial_F_, &inertial_zdot_);
+    solve_mass_matrix(t, x.segment(0, dims_.nq), inertial_F_, &inertial_acceleration_);
+    request.acceleration = inertial_acceleration_.data();
+  }
   // Differences count their evaluations of (F, f_z) as derivative
   // evaluations too, as Drake does.
   const int evaluations = jacobian_evaluator_.evaluate(t, x, request, &jacobians_);
@@ -157,7 +169,13 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   linearization_.resize(nx);
   predictor_qdot_.resize(dims_.nq);
   energy_state_.x = Eigen::VectorXd::Zero(nx);
-  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive;
+  // Only where an implicit Euler step cannot gain energy: a passive scene
+  // with a constant mass matrix (the step minimizes an incremental
+  // potential). With a configuration-dependent M(q) (articulated bodies) the
+  // step's velocity-product terms trade O(h^2) energy either way, so a gain
+  // there is no sign of a spurious root.
+  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive &&
+                  caps_.constant_mass_matrix;
   jacobians_valid_ = false;
   invalidate_factorization();
   for (auto& m : matrices_) m.h = 0.0;
@@ -235,8 +253,14 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
                                                        : implicit_.max_newton_iterations;
   for (int i = 0; i < max_iterations; ++i) {
     if (full_newton) {
-      // Linearize at the current iterate itself.
+      // Linearize at the current iterate itself, with the step's own mean
+      // acceleration (v - v_n) / h in the inertial term.
+      if (!caps_.constant_mass_matrix && dims_.nv > 0) {
+        inertial_acceleration_ = (x->segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
+        iterate_acceleration_ = true;
+      }
       compute_jacobian(tf, *x, 0.0);
+      iterate_acceleration_ = false;
       mark_jacobian_stale();
       if (!form_and_factor(h)) return false;
     }

@@ -159,6 +159,11 @@ void JacobianEvaluator::evaluate_rates(double t, const Eigen::VectorXd& x,
   const auto v = x.segment(dims_.nq, dims_.nv);
   const auto z = x.segment(dims_.nq + dims_.nv, dims_.nz);
   system_.forces(t, q, v, z, f->head(dims_.nv));
+  if (acceleration_) {
+    // F - M(q) a (JacobianRequest::acceleration).
+    system_.mass_matrix(q, &mass_);
+    f->head(dims_.nv).noalias() -= mass_ * Eigen::Map<const Eigen::VectorXd>(acceleration_, dims_.nv);
+  }
   if (dims_.nz > 0) system_.misc_derivatives(t, q, v, z, f->tail(dims_.nz));
 }
 
@@ -250,6 +255,8 @@ int JacobianEvaluator::evaluate(double t, const Eigen::VectorXd& x, const Jacobi
   const bool forward = scheme_ == JacobianScheme::kForward;
   const double e = forward ? kForwardIncrement : kCentralIncrement;
   x_perturbed_ = x;
+  acceleration_ = system_.capabilities().constant_mass_matrix ? nullptr : request.acceleration;
+  if (acceleration_ && mass_.rows() == 0) mass_ = system_.mass_matrix_pattern();
   if (forward) evaluate_rates(t, x, &f_base_);
 
   for (int colour = 0; colour < colours; ++colour) {
@@ -283,6 +290,7 @@ int JacobianEvaluator::evaluate(double t, const Eigen::VectorXd& x, const Jacobi
     check_nothing_lost(colour, f_plus_, f_minus_);
     store_columns(colour, f_plus_, f_minus_, step_sum_, J);
   }
+  acceleration_ = nullptr;
   return evaluations_per_jacobian();
 }
 

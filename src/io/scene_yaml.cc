@@ -18,7 +18,10 @@
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/integrator_factory.h"
 #include "stiffsim/io/obj_mesh.h"
+#include "stiffsim/model/articulated.h"
+#include "stiffsim/model/compliant.h"
 #include "stiffsim/model/particle_meshes.h"
+#include "stiffsim/model/urdf.h"
 #include "stiffsim/model/particles.h"
 
 namespace stiffsim {
@@ -59,8 +62,6 @@ std::vector<std::string> component_keys(const std::string& type) {
     return {"name", "type", "file", "density", "stretch", "bend", "pinned", "drag"};
   }
   if (type == "urdf") {
-    // Known so that --set paths into a urdf component are accepted and the
-    // user hears "not supported yet" rather than "unknown key".
     return {"name",
             "type",
             "file",
@@ -576,6 +577,144 @@ void read_simulation(const Section& top, SceneConfig* config) {
       s.boolean_or("definite_iteration_matrix", implicit.definite_iteration_matrix);
 }
 
+// A per-joint setting given as one number for every 1-DOF joint or as a map
+// joint name -> number; `index` maps the URDF's moving joint names to bodies.
+std::vector<double> per_joint(const Section& c, const std::string& key, Range range,
+                              const RigidTree& tree, double fallback) {
+  std::vector<double> values(tree.bodies.size(), fallback);
+  if (!c.has(key)) return values;
+  const YAML::Node n = c.get(key);
+  auto one_dof = [&](std::size_t i) { return joint_nv(tree.bodies[i].type) == 1; };
+  if (n.IsScalar()) {
+    const double x = c.number_value(n, c.label(key), range);
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      if (one_dof(i)) values[i] = x;
+    }
+    return values;
+  }
+  if (!n.IsMap()) c.fail(n, c.label(key) + " must be a number or a map joint name -> number, got " + node_kind(n));
+  for (const auto& entry : n) {
+    const std::string joint = entry.first.Scalar();
+    const std::string what = c.label(key) + "." + joint;
+    std::size_t i = 0;
+    while (i < tree.bodies.size() && tree.bodies[i].joint != joint) ++i;
+    if (i == tree.bodies.size()) {
+      c.fail(entry.first, "unknown joint '" + joint + "' in " + c.label(key) +
+                              " (not a moving joint of " + tree.file + ")");
+    }
+    if (!one_dof(i)) {
+      c.fail(entry.first, what + ": joint '" + joint + "' is " + joint_type_name(tree.bodies[i].type) +
+                              "; only 1-DOF joints take this setting");
+    }
+    values[i] = c.number_value(entry.second, what, range);
+  }
+  return values;
+}
+
+int body_of_joint(const Section& c, const YAML::Node& key, const RigidTree& tree, const std::string& where) {
+  const std::string joint = key.Scalar();
+  for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
+    if (tree.bodies[i].joint == joint) return static_cast<int>(i);
+  }
+  c.fail(key, "unknown joint '" + joint + "' in " + where + " (not a moving joint of " + tree.file + ")");
+}
+
+// Values of one joint in `initial`: a number for a 1-DOF joint, a list of
+// `size` numbers otherwise.
+void read_joint_values(const Section& c, const YAML::Node& value, const std::string& what, int size,
+                       Eigen::Ref<Eigen::VectorXd> out) {
+  if (size == 1 && value.IsScalar()) {
+    out[0] = c.number_value(value, what, Range::kFinite);
+    return;
+  }
+  if (!value.IsSequence() || static_cast<int>(value.size()) != size) {
+    c.fail(value, what + " must be " + (size == 1 ? std::string("a number") : "a list of " + std::to_string(size) + " numbers") +
+                      ", got " + node_kind(value));
+  }
+  for (int k = 0; k < size; ++k) out[k] = c.number_value(value[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
+}
+
+std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, const Eigen::Vector3d& g,
+                                   const std::filesystem::path& base_dir, std::vector<std::string>* notes) {
+  const std::string file = c.text("file");
+  std::filesystem::path resolved(file);
+  if (resolved.is_relative()) resolved = base_dir / resolved;
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(resolved, error)) {
+    c.fail(c.get("file"), "URDF file '" + file + "' not found (looked for " +
+                              resolved.lexically_normal().string() + ")");
+  }
+  UrdfOptions uo;
+  uo.component_name = name;
+  uo.floating_base = c.boolean_or("floating_base", false);
+  RigidTree tree;
+  try {
+    tree = load_urdf(resolved.lexically_normal().string(), uo, notes);
+  } catch (const InputError& e) {
+    c.fail(c.get("file"), e.what());
+  }
+  const std::string formulation = c.choice_or("formulation", {"exact", "compliant"}, "exact");
+
+  ArticulatedOptions o;
+  o.gravity = g;
+  const std::vector<double> k = per_joint(c, "joint_stiffness", Range::kNonNegative, tree, 0.0);
+  const std::vector<double> rest = per_joint(c, "joint_rest", Range::kFinite, tree, 0.0);
+  const std::vector<double> damping = per_joint(c, "joint_damping", Range::kNonNegative, tree, 0.0);
+  o.joint_forces.resize(tree.bodies.size());
+  for (std::size_t i = 0; i < tree.bodies.size(); ++i) o.joint_forces[i] = JointForce{k[i], rest[i], damping[i]};
+
+  // Offsets of the exact formulation's coordinates, in which `initial` is given.
+  std::vector<int> qo, vo;
+  int nq = 0, nv = 0;
+  for (const TreeBody& b : tree.bodies) {
+    qo.push_back(nq);
+    vo.push_back(nv);
+    nq += joint_nq(b.type);
+    nv += joint_nv(b.type);
+  }
+  o.initial_q = Eigen::VectorXd::Zero(nq);
+  o.initial_v = Eigen::VectorXd::Zero(nv);
+  for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
+    if (tree.bodies[i].type == JointType::kFloating) o.initial_q[qo[i] + 3] = 1.0;
+  }
+  if (c.has("initial")) {
+    const Section init(c.doc(), c.get("initial"), c.context(), "initial.", {"all_joints", "joints", "velocities"});
+    if (init.has("all_joints")) {
+      const double a = init.number("all_joints", Range::kFinite);
+      for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
+        if (joint_nq(tree.bodies[i].type) == 1) o.initial_q[qo[i]] = a;
+      }
+    }
+    for (const char* key : {"joints", "velocities"}) {
+      if (!init.has(key)) continue;
+      const YAML::Node m = init.get(key);
+      const bool positions = std::string(key) == "joints";
+      if (!m.IsMap()) init.fail(m, init.label(key) + " must be a map joint name -> value, got " + node_kind(m));
+      for (const auto& entry : m) {
+        const int i = body_of_joint(init, entry.first, tree, init.label(key));
+        const JointType type = tree.bodies[i].type;
+        const int size = positions ? joint_nq(type) : joint_nv(type);
+        Eigen::VectorXd& target = positions ? o.initial_q : o.initial_v;
+        read_joint_values(init, entry.second, init.label(key) + "." + entry.first.Scalar(), size,
+                          target.segment(positions ? qo[i] : vo[i], size));
+      }
+    }
+  }
+  if (formulation == "exact") {
+    if (c.has("bushing")) c.fail(c.get("bushing"), "bushing applies to formulation: compliant only");
+    return with_location(c, name, [&] { return std::make_unique<ArticulatedSystem>(std::move(tree), std::move(o)); });
+  }
+  BushingParameters bp;
+  if (c.has("bushing")) {
+    const Section b(c.doc(), c.get("bushing"), c.context(), "bushing.", {"k_lin", "c_lin", "k_ang", "c_ang"});
+    bp.k_lin = b.number_or("k_lin", Range::kNonNegative, bp.k_lin);
+    bp.c_lin = b.number_or("c_lin", Range::kNonNegative, bp.c_lin);
+    bp.k_ang = b.number_or("k_ang", Range::kNonNegative, bp.k_ang);
+    bp.c_ang = b.number_or("c_ang", Range::kNonNegative, bp.c_ang);
+  }
+  return with_location(c, name, [&] { return make_compliant(tree, o, bp); });
+}
+
 SceneConfig build_scene(const YAML::Node& root, const Document& doc,
                         const std::filesystem::path& base_dir, const std::string& scene_name) {
   const Section top(doc, root, "", "", top_level_keys());
@@ -633,9 +772,13 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
                    " (expected one of: " + join(component_types()) + ")");
     }
     const std::string type = type_node.Scalar();
-    if (type == "urdf") doc.fail(type_node, context, "type 'urdf' is not supported yet");
 
     const Section c(doc, node, context, "", component_keys(type));
+    if (type == "urdf") {
+      components.push_back(build_urdf(c, name, gravity, base_dir, &config.notes));
+      config.surfaces.emplace_back();
+      continue;
+    }
     BuiltComponent built;
     if (type == "cloth") {
       built = build_cloth(c, name, gravity);
@@ -735,12 +878,35 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
       doc->fail_override(text, "unknown key '" + path + "' (component '" + keys[0] +
                                    "' keys: " + join(allowed) + ")");
     }
-    const size_t depth = is_spring_block(keys[1]) ? 3 : 2;
+    const bool urdf = type.IsScalar() && type.Scalar() == "urdf";
+    if (urdf) {
+      // initial.all_joints, initial.joints.<joint>, initial.velocities.<joint>,
+      // bushing.<k_lin|c_lin|k_ang|c_ang>, joint_stiffness.<joint> (and
+      // joint_rest, joint_damping); joint names are checked against the URDF
+      // when the component is built.
+      const bool per_joint_map =
+          keys[1] == "joint_stiffness" || keys[1] == "joint_rest" || keys[1] == "joint_damping";
+      bool ok = keys.size() == 2 || (per_joint_map && keys.size() == 3);
+      if (keys[1] == "bushing" && keys.size() == 3) {
+        ok = contains({"k_lin", "c_lin", "k_ang", "c_ang"}, keys[2]);
+      }
+      if (keys[1] == "initial" && keys.size() >= 3) {
+        ok = (keys.size() == 3 && keys[2] == "all_joints") ||
+             (keys.size() == 4 && (keys[2] == "joints" || keys[2] == "velocities"));
+      }
+      if (!ok) {
+        doc->fail_override(text, "unknown key '" + path +
+                                     "' (urdf paths: initial.all_joints, initial.joints.<joint>, "
+                                     "initial.velocities.<joint>, bushing.k_lin|c_lin|k_ang|c_ang, "
+                                     "joint_stiffness|joint_rest|joint_damping[.<joint>])");
+      }
+    }
+    const size_t depth = urdf ? keys.size() : is_spring_block(keys[1]) ? 3 : 2;
     if (keys.size() > depth) {
       doc->fail_override(text, "unknown key '" + path + "' ('" + keys[0] + "." + keys[1] +
                                    "' has no key '" + keys[depth] + "')");
     }
-    if (keys.size() == 3 && !contains(spring_keys(), keys[2])) {
+    if (!urdf && keys.size() == 3 && !contains(spring_keys(), keys[2])) {
       doc->fail_override(text,
                          "unknown key '" + path + "' (spring keys: " + join(spring_keys()) + ")");
     }
@@ -859,9 +1025,23 @@ SceneConfig load_scene(const std::string& path, const std::vector<std::string>& 
   std::transform(extension.begin(), extension.end(), extension.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   if (extension == ".urdf") {
-    throw InputError(path +
-                     ": URDF scenes are not supported yet (only YAML scenes with cloth, rope and "
-                     "mesh components)");
+    // A bare URDF is a scene with one exact urdf component named after the
+    // file, welded root, every joint at 0; --set reaches it by that name.
+    const std::filesystem::path p(path);
+    std::string name = p.stem().string();
+    for (char& ch : name) {
+      if (!std::isalnum(static_cast<unsigned char>(ch)) && ch != '_' && ch != '-') ch = '_';
+    }
+    if (name.empty() || contains(top_level_keys(), name)) name = "robot";
+    // The URDF's own errors name the file alone: the scene around it is
+    // made up here and has no lines to point at.
+    load_urdf(path, UrdfOptions{name, false}, nullptr);
+    YAML::Emitter scene;
+    scene << YAML::BeginMap << YAML::Key << "components" << YAML::Value << YAML::BeginSeq
+          << YAML::BeginMap << YAML::Key << "name" << YAML::Value << name << YAML::Key << "type"
+          << YAML::Value << "urdf" << YAML::Key << "file" << YAML::Value << p.filename().string()
+          << YAML::EndMap << YAML::EndSeq << YAML::EndMap;
+    return parse_scene(scene.c_str(), path, overrides);
   }
   std::error_code error;
   if (std::filesystem::is_directory(path, error)) {

@@ -497,9 +497,11 @@ void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) co
 template <typename T>
 void ArticulatedSystem::evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
                                         const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
-                                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const {
-  // Recursive Newton-Euler with zero joint accelerations: tau = C(q, v) + g(q)
-  // (gravity as an upward acceleration of the world), F = -tau + joint forces.
+                                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F,
+                                        const double* acceleration) const {
+  // Recursive Newton-Euler: tau = M(q) a + C(q, v) + g(q) (gravity as an
+  // upward acceleration of the world), F = -tau + joint forces; a = 0 unless
+  // `acceleration` is given (then F - M a, for JacobianRequest::acceleration).
   const int nb = static_cast<int>(tree_.bodies.size());
   std::vector<Pose<T>> pose(nb);
   std::vector<MotionSubspace<T>> S(nb);
@@ -514,7 +516,11 @@ void ArticulatedSystem::evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1
     pose[i] = jm.pose;
     S[i] = jm.S;
     const Vec6<T> vJ = jm.S * v.segment(v_offset_[i], nv);
-    const Vec6<T> cJ = joint_velocity_product<T>(vJ);
+    Vec6<T> cJ = joint_velocity_product<T>(vJ);
+    if (acceleration) {
+      const Eigen::Map<const Eigen::VectorXd> a(acceleration + v_offset_[i], nv);
+      cJ += jm.S * a.cast<T>();
+    }
     if (b.parent < 0) {
       V[i] = vJ;
       A[i] = motion_to_child<T>(pose[i], a_world) + cJ;
@@ -547,12 +553,12 @@ void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVec
                                const ConstVectorRef& z, VectorRef F) const {
   (void)t, (void)z;
   Eigen::VectorXd out;
-  evaluate_forces<double>(q, v, &out);
+  evaluate_forces<double>(q, v, &out, nullptr);
   F = out;
 }
 
 void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v,
-                                        ForceJacobians* J) const {
+                                        const double* acceleration, ForceJacobians* J) const {
   // Seeded forward mode: the columns of one colour share no row of [K D], so
   // they can share a derivative lane; each pass carries kLanes colours.
   const int nq = dims_.nq, nv = dims_.nv;
@@ -569,7 +575,7 @@ void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVect
     };
     for (int j = 0; j < nq; ++j) seed(j, q[j], &qd[j]);
     for (int j = 0; j < nv; ++j) seed(nq + j, v[j], &vd[j]);
-    evaluate_forces<Dual>(qd, vd, &Fd);
+    evaluate_forces<Dual>(qd, vd, &Fd, acceleration);
     auto store = [&](SparseMatrix& A, int column_offset) {
       for (int j = 0; j < A.outerSize(); ++j) {
         const int lane = column_colour_[column_offset + j] - first;
@@ -588,16 +594,16 @@ void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVect
 void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                         const ConstVectorRef& z, const JacobianRequest& request,
                                         ForceJacobians* J) const {
-  (void)t, (void)z, (void)request;
-  exact_jacobians(q, v, J);
+  (void)t, (void)z;
+  exact_jacobians(q, v, request.acceleration, J);
 }
 
 void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
                                                   const ConstVectorRef& v, const ConstVectorRef& z,
                                                   const JacobianRequest& request,
                                                   ForceJacobians* J) const {
-  (void)t, (void)z, (void)request;
-  exact_jacobians(q, v, J);
+  (void)t, (void)z;
+  exact_jacobians(q, v, request.acceleration, J);
 }
 
 std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
@@ -667,6 +673,6 @@ double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) co
 }
 
 template void ArticulatedSystem::evaluate_forces<double>(const Eigen::VectorXd&, const Eigen::VectorXd&,
-                                                         Eigen::VectorXd*) const;
+                                                         Eigen::VectorXd*, const double*) const;
 
 }  // namespace stiffsim

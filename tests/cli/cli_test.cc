@@ -250,7 +250,7 @@ TEST_F(Cli, BadScenesExitTwoNameFileAndKeyAndLeaveNoFiles) {
       {"nan.yaml", with(kSmallCloth, "size: [1.0, 1.0]", "size: [1.0, .nan]"),
        "nan.yaml:5:17: components[0] (cloth): size[1] must be a finite number"},
       {"urdf.yaml", "components:\n  - {name: arm, type: urdf, file: chain_10.urdf}\n",
-       "urdf.yaml:2:23: components[0] (arm): type 'urdf' is not supported yet"},
+       "urdf.yaml:2:35: components[0] (arm): URDF file 'chain_10.urdf' not found"},
   };
   std::set<std::string> inputs;
   for (const Case& c : cases) {
@@ -275,13 +275,24 @@ TEST_F(Cli, BadSetExitsTwoAndLeavesNoFiles) {
   EXPECT_TRUE(outputs({}).empty());
 }
 
-TEST_F(Cli, BareUrdfIsNotSupportedYet) {
+TEST_F(Cli, BareUrdfWithoutLinksExitsTwoNamingTheFile) {
   write("chain.urdf", "<robot name='chain'/>\n");
   const Result r = run("run chain.urdf --output t.csv");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_EQ(r.err.rfind("stiffsim: error: chain.urdf: URDF scenes are not supported yet", 0), 0u)
-      << r.err;
+  EXPECT_EQ(r.err.rfind("stiffsim: error: chain.urdf: ", 0), 0u) << r.err;
+  EXPECT_NE(r.err.find("No link elements"), std::string::npos) << r.err;
   EXPECT_TRUE(outputs({"chain.urdf"}).empty());
+}
+
+TEST_F(Cli, BareUrdfRunsWithJointColumns) {
+  const Result r = run("run '" + kModels + "chain_2.urdf' --t-final 0.1 --set chain_2.initial.all_joints=0.3 "
+                       "--output t.csv -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::ifstream in(dir_ / "t.csv");
+  std::string header;
+  while (std::getline(in, header) && header.rfind("#", 0) == 0) {
+  }
+  EXPECT_EQ(header, "t,q:chain_2/joint_1,q:chain_2/joint_2,v:chain_2/joint_1,v:chain_2/joint_2");
 }
 
 TEST_F(Cli, MissingSceneFileExitsTwo) {

@@ -383,8 +383,8 @@ TEST(SceneYaml, ComponentTypesAreChecked) {
                    "mesh, urdf)"),
             std::string::npos)
       << e;
-  e = load_error("components:\n  - {name: arm, type: urdf, file: chain_10.urdf}\n");
-  EXPECT_NE(e.find("bad.yaml:2:23: components[0] (arm): type 'urdf' is not supported yet"),
+  e = load_error("components:\n  - {name: arm, type: urdf, file: nowhere.urdf}\n");
+  EXPECT_NE(e.find("bad.yaml:2:35: components[0] (arm): URDF file 'nowhere.urdf' not found"),
             std::string::npos)
       << e;
   // Keys of another type are unknown keys of this one.
@@ -410,14 +410,13 @@ TEST(SceneYaml, FileLevelErrors) {
   } catch (const InputError& e) {
     EXPECT_STREQ(e.what(), "/nonexistent/scene.yaml: cannot open");
   }
-  try {
-    load_scene(model_path("chain_10.urdf"));
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("chain_10.urdf: URDF scenes are not supported yet"),
-              std::string::npos)
-        << e.what();
-  }
+  // A bare URDF is a scene with one exact component named after the file.
+  const SceneConfig bare = load_scene(model_path("chain_10.urdf"), {"chain_10.initial.all_joints=0.3"});
+  ASSERT_EQ(bare.scene->component_count(), 1);
+  EXPECT_EQ(bare.scene->component(0).name(), "chain_10");
+  EXPECT_EQ(bare.scene->dimensions().nq, 10);
+  EXPECT_EQ(bare.scene->initial_state().x[3], 0.3);
+  EXPECT_EQ(bare.scene->position_names()[0], "chain_10/joint_1");
 }
 
 }  // namespace

@@ -170,6 +170,10 @@ class ImplicitIntegrator : public IntegratorBase {
   bool jacobians_valid_ = false;
   Eigen::VectorXd x_big_, x_half_, x_small_;
   Eigen::VectorXd linearization_;  // where compute_force_jacobians_ahead() linearized
+  // Acceleration (and the rates it comes from) where the Jacobian is taken,
+  // for the inertial term of a configuration-dependent M.
+  Eigen::VectorXd inertial_F_, inertial_zdot_, inertial_acceleration_;
+  bool iterate_acceleration_ = false;  // inertial_acceleration_ set by a full Newton iterate
 
  private:
   // The refresh ladder: kSkip when the rung would rebuild the matrix that

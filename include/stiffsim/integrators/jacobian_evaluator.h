@@ -76,6 +76,10 @@ class JacobianEvaluator {
   // Columns of x grouped by colour: colour c owns
   // columns_by_colour_[colour_start_[c], colour_start_[c + 1]).
   std::vector<int> colour_start_, columns_by_colour_;
+  // JacobianRequest::acceleration of the evaluation in progress (differences
+  // only), and M's scratch for it.
+  mutable const double* acceleration_ = nullptr;
+  mutable SparseMatrix mass_;
   // The pattern's structure, to check that J keeps it.
   std::vector<Eigen::Index> pattern_nonzeros_;
   // Workspaces: perturbed state, rates and exact increments.

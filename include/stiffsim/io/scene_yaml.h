@@ -28,6 +28,9 @@ struct SceneConfig {
   // list cannot tell which springs bound a face, and the VTK writer wants
   // faces.
   std::vector<std::vector<std::array<int, 3>>> surfaces;
+  // What the loaders ignored or assumed, one line each (e.g. a URDF's joint
+  // limits and geometry); the CLI prints them unless --quiet.
+  std::vector<std::string> notes;
 };
 
 // Loads a scene file after applying `overrides`, each "PATH=VALUE" as given to
@@ -37,8 +40,8 @@ struct SceneConfig {
 // before validation, so an overridden value is checked like any other.
 // Throws InputError naming the file (and line, column and key path where
 // known) for every problem: unreadable or malformed YAML, unknown keys, values
-// out of range, missing meshes, unsupported component types (urdf, for now)
-// and bare URDF scene files.
+// out of range, missing meshes or URDFs, and broken URDFs. A bare .urdf file
+// is a scene with one exact urdf component named after the file's stem.
 SceneConfig load_scene(const std::string& path, const std::vector<std::string>& overrides = {});
 
 // As load_scene, from text in memory. `source_name` names the document in

@@ -93,7 +93,8 @@ class ArticulatedSystem : public System {
   void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
               VectorRef F) const override;
   const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
-  // Exact K and D (complete: nothing dropped, request ignored), by the same
+  // Exact K and D (complete: nothing dropped; request.acceleration honoured),
+  // by the same
   // seeded forward-mode differentiation as automatic_force_jacobians.
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
@@ -124,13 +125,16 @@ class ArticulatedSystem : public System {
   // Passes of F per Jacobian (colours / lanes, rounded up).
   int jacobian_passes() const { return jacobian_passes_; }
 
+  // F(q, v), or F - M(q) a with joint accelerations `acceleration` (nv
+  // values) when it is not null.
   template <typename T>
   void evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
                        const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
-                       Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const;
+                       Eigen::Matrix<T, Eigen::Dynamic, 1>* F, const double* acceleration) const;
 
  private:
-  void exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v, ForceJacobians* J) const;
+  void exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration,
+                       ForceJacobians* J) const;
 
   RigidTree tree_;
   ArticulatedOptions options_;

@@ -22,10 +22,10 @@ struct UrdfOptions {
 // joint) for: a missing or unreadable file, broken XML, what urdfdom rejects
 // (its message passed on), a cycle or several roots, a joint type outside
 // the supported set, a zero axis, a non-finite number, a negative mass, an
-// inertia tensor that is not symmetric positive definite (about the COM; zero
-// only for a massless link), and a moving subtree without mass (a link that
-// must move but whose subtree carries no mass or no rotational inertia makes
-// M singular). `notes` (may be null) receives one line per file listing what
+// inertia tensor that is not symmetric positive definite (about the COM; a
+// massless link may carry a semidefinite one), and a moving subtree without
+// mass (it would make M singular). Cycles and links with two parents are
+// found before urdfdom sees the file. `notes` (may be null) receives one line per file listing what
 // was ignored.
 RigidTree load_urdf(const std::string& path, const UrdfOptions& options,
                     std::vector<std::string>* notes);
