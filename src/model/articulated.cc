@@ -1,5 +1,6 @@
 #include "stiffsim/model/articulated.h"
 
+#include <Eigen/SparseCholesky>
 #include <unsupported/Eigen/AutoDiff>
 #include <cmath>
 #include <sstream>
@@ -350,11 +351,33 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   }
   velocity_map_pattern_ = Np.build();
 
-  const ColumnColouring colouring = colour_columns(
-      dims_.nv, dims_.nq + dims_.nv,
-      {PatternBlock{&jacobian_pattern_.dF_dq, 0, 0}, PatternBlock{&jacobian_pattern_.dF_dv, 0, dims_.nq}});
-  column_colour_ = colouring.colour;
-  colours_ = colouring.colours;
+  // A motion that moves no mass (a massless floating root turning about its
+  // child's joint axis, a massless leaf) makes M singular; say so here rather
+  // than fail in the first Newton solve.
+  SparseMatrix M0 = mass_pattern_;
+  mass_matrix(options_.initial_q, &M0);
+  Eigen::SimplicialLDLT<SparseMatrix> ldlt(M0);
+  const double scale = M0.diagonal().cwiseAbs().maxCoeff();
+  if (ldlt.info() != Eigen::Success || ldlt.vectorD().minCoeff() <= 1e-12 * scale) {
+    throw InputError(w + ": the mass matrix is singular at the initial state: some joint motion moves "
+                         "no mass (e.g. a massless floating root turning about its child's joint axis, "
+                         "or a massless link at the end of a branch)");
+  }
+
+  const long dense = static_cast<long>(dims_.nv) * (dims_.nq + dims_.nv);
+  if (jacobian_pattern_.dF_dq.nonZeros() + jacobian_pattern_.dF_dv.nonZeros() == dense) {
+    // A serial chain in reduced coordinates: every column its own colour,
+    // without the greedy colouring's O(rows cols^2) search.
+    column_colour_.resize(dims_.nq + dims_.nv);
+    for (int j = 0; j < dims_.nq + dims_.nv; ++j) column_colour_[j] = j;
+    colours_ = dims_.nq + dims_.nv;
+  } else {
+    const ColumnColouring colouring = colour_columns(
+        dims_.nv, dims_.nq + dims_.nv,
+        {PatternBlock{&jacobian_pattern_.dF_dq, 0, 0}, PatternBlock{&jacobian_pattern_.dF_dv, 0, dims_.nq}});
+    column_colour_ = colouring.colour;
+    colours_ = colouring.colours;
+  }
   jacobian_passes_ = (colours_ + kLanes - 1) / kLanes;
 }
 
@@ -606,27 +629,37 @@ void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef
   exact_jacobians(q, v, request.acceleration, J);
 }
 
-std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
-  const int nb = static_cast<int>(tree_.bodies.size());
-  std::vector<Pose<double>> world(nb);
+void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
+                        std::vector<Pose<double>>* world, std::vector<Vec6<double>>* velocities) {
+  const int nb = static_cast<int>(tree.bodies.size());
+  world->resize(nb);
+  if (velocities) velocities->resize(nb);
+  int qo = 0, vo = 0;
   for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree_.bodies[i];
-    const Pose<double> local = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type))).pose;
-    world[i] = b.parent < 0 ? local : compose(world[b.parent], local);
+    const TreeBody& b = tree.bodies[i];
+    const JointMotion<double> jm = joint_motion<double>(b, q.segment(qo, joint_nq(b.type)));
+    (*world)[i] = b.parent < 0 ? jm.pose : compose((*world)[b.parent], jm.pose);
+    if (velocities) {
+      const Vec6<double> vJ = jm.S * v->segment(vo, joint_nv(b.type));
+      (*velocities)[i] =
+          b.parent < 0 ? vJ : Vec6<double>(motion_to_child<double>(jm.pose, (*velocities)[b.parent]) + vJ);
+    }
+    qo += joint_nq(b.type);
+    vo += joint_nv(b.type);
   }
+}
+
+std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
+  std::vector<Pose<double>> world;
+  forward_kinematics(tree_, q, nullptr, &world, nullptr);
   return world;
 }
 
 std::vector<Vec6<double>> ArticulatedSystem::body_velocities(const Eigen::VectorXd& q,
                                                              const Eigen::VectorXd& v) const {
-  const int nb = static_cast<int>(tree_.bodies.size());
-  std::vector<Vec6<double>> V(nb);
-  for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree_.bodies[i];
-    const JointMotion<double> jm = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type)));
-    const Vec6<double> vJ = jm.S * v.segment(v_offset_[i], joint_nv(b.type));
-    V[i] = b.parent < 0 ? vJ : Vec6<double>(motion_to_child<double>(jm.pose, V[b.parent]) + vJ);
-  }
+  std::vector<Pose<double>> world;
+  std::vector<Vec6<double>> V;
+  forward_kinematics(tree_, q, &v, &world, &V);
   return V;
 }
 

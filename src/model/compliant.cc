@@ -15,16 +15,40 @@ std::unique_ptr<ArticulatedSystem> make_compliant(const RigidTree& tree, const A
                        "': bushing k_lin, c_lin, k_ang and c_ang must be finite and >= 0");
     }
   }
-  // The exact system validates the tree and the initial state, and places the
-  // free bodies.
-  const ArticulatedSystem reduced(tree, exact);
-  const State x0 = reduced.initial_state();
-  const Dimensions d = reduced.dimensions();
-  const Eigen::VectorXd q0 = x0.q(d), v0 = x0.v(d);
-  const std::vector<Pose<double>> world = reduced.world_poses(q0);
-  const std::vector<Vec6<double>> V = reduced.body_velocities(q0, v0);
-
+  // The exact coordinates place the free bodies (the exact system itself is
+  // not built: for a long chain its dense patterns cost more than the run).
   const int nb = static_cast<int>(tree.bodies.size());
+  int nq = 0, nv = 0;
+  for (const TreeBody& b : tree.bodies) nq += joint_nq(b.type), nv += joint_nv(b.type);
+  Eigen::VectorXd q0 = exact.initial_q, v0 = exact.initial_v;
+  if (q0.size() == 0) {
+    q0 = Eigen::VectorXd::Zero(nq);
+    for (int i = 0, qo = 0; i < nb; qo += joint_nq(tree.bodies[i].type), ++i) {
+      if (tree.bodies[i].type == JointType::kFloating) q0[qo + 3] = 1.0;
+    }
+  }
+  if (v0.size() == 0) v0 = Eigen::VectorXd::Zero(nv);
+  if (q0.size() != nq || v0.size() != nv || !q0.allFinite() || !v0.allFinite()) {
+    throw InputError("component '" + tree.name + "': the initial state needs " + std::to_string(nq) +
+                     " positions and " + std::to_string(nv) + " velocities, all finite");
+  }
+  if (!exact.joint_forces.empty() && static_cast<int>(exact.joint_forces.size()) != nb) {
+    throw InputError("component '" + tree.name + "': joint forces given for " +
+                     std::to_string(exact.joint_forces.size()) + " joints; expected " + std::to_string(nb));
+  }
+  for (int i = 0, qo = 0; i < nb; qo += joint_nq(tree.bodies[i].type), ++i) {
+    if (tree.bodies[i].type != JointType::kFloating) continue;
+    const double n = q0.segment<4>(qo + 3).norm();
+    if (!(n > 1e-12)) {
+      throw InputError("component '" + tree.name + "': joint '" + tree.bodies[i].joint +
+                       "': the initial quaternion is zero");
+    }
+    q0.segment<4>(qo + 3) /= n;
+  }
+  std::vector<Pose<double>> world;
+  std::vector<Vec6<double>> V;
+  forward_kinematics(tree, q0, &v0, &world, &V);
+
   RigidTree forest;
   forest.name = tree.name;
   forest.file = tree.file;

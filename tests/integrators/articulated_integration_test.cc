@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -83,6 +84,7 @@ struct VieEnergyRun {
   double e0 = 0.0, e_end = 0.0;
   double largest_increase = 0.0;  // max over steps of E(k+1) - E(k), relative to |E0|
   double increase_time = 0.0;     // where (end of the step)
+  long increasing_steps = 0;      // steps that gained more than 1e-9 |E0|
   long steps = 0;
 };
 
@@ -98,6 +100,7 @@ VieEnergyRun vie_energy(const ArticulatedSystem& sys, double accuracy, double t_
     vie.step_at_most(t_final);
     const double e = sys.energy(vie.state());
     const double inc = (e - e_prev) / std::abs(r.e0);
+    if (inc > 1e-9) ++r.increasing_steps;
     if (inc > r.largest_increase) {
       r.largest_increase = inc;
       r.increase_time = vie.state().t;
@@ -109,21 +112,36 @@ VieEnergyRun vie_energy(const ArticulatedSystem& sys, double accuracy, double t_
   return r;
 }
 
-TEST(ArticulatedIntegration, VieNeverGainsEnergyOnUndampedChains) {
-  // Implicit Euler on a conservative system dissipates; with the energy guard
-  // a step that gains energy is rejected. 1e-9 |E0| allows for the round-off
-  // of the energy evaluation and the Newton tolerance (kappa * accuracy on
-  // the velocities enters the energy only to second order near a solution
-  // that dissipates).
-  for (const char* file : {"chain_2.urdf", "chain_10.urdf"}) {
-    const auto sys = bent_chain(file);
-    const VieEnergyRun r = vie_energy(*sys, 1e-4, 5.0);
-    std::cout << file << ": vie E0 = " << r.e0 << " E(5 s) = " << r.e_end
+TEST(ArticulatedIntegration, VieEnergyOnUndampedChains) {
+  // The claim "VIE never gains energy" (E(k+1) <= E(k) + 1e-9 |E0| at every
+  // accepted step; 1e-9 for the round-off of the energy sums) holds on the
+  // double pendulum but NOT on chain_10: there single steps gain up to
+  // ~8e-6 |E0| (measured, near t = 2.09 s; a third of the ~127000 steps
+  // gain more than 1e-9 |E0|). That is expected from the
+  // method: with a configuration-dependent M(q) the velocity-product terms
+  // of a step trade O(h^2) energy either way, which is why the integrator's
+  // energy guard is off for such systems (implicit_integrator.cc,
+  // guard_energy_ needs constant_mass_matrix). What does hold there is
+  // asserted instead: every gain is O(accuracy) (below accuracy * |E0|,
+  // 12x above the measured worst) and the run as a whole dissipates.
+  const double accuracy = 1e-4;
+  struct Case {
+    const char* file;
+    bool strictly_monotone;
+  };
+  for (const Case c : {Case{"chain_2.urdf", true}, Case{"chain_10.urdf", false}}) {
+    const auto sys = bent_chain(c.file);
+    const VieEnergyRun r = vie_energy(*sys, accuracy, 5.0);
+    std::cout << c.file << ": vie E0 = " << r.e0 << " E(5 s) = " << r.e_end
               << " largest step increase / |E0| = " << r.largest_increase << " at t = " << r.increase_time
-              << " s, " << r.steps << " steps\n";
-    RecordProperty(std::string(file) + "_vie_largest_increase", std::to_string(r.largest_increase));
-    EXPECT_LE(r.largest_increase, 1e-9) << file << " at t = " << r.increase_time;
-    EXPECT_LT(r.e_end, r.e0) << file;
+              << " s; " << r.increasing_steps << " of " << r.steps << " steps gain > 1e-9 |E0|\n";
+    RecordProperty(std::string(c.file) + "_vie_largest_increase", std::to_string(r.largest_increase));
+    if (c.strictly_monotone) {
+      EXPECT_LE(r.largest_increase, 1e-9) << c.file << " at t = " << r.increase_time;
+    } else {
+      EXPECT_LE(r.largest_increase, accuracy) << c.file << " at t = " << r.increase_time;
+    }
+    EXPECT_LT(r.e_end, r.e0) << c.file;
   }
 }
 
@@ -187,11 +205,15 @@ TEST(ArticulatedIntegration, FreeBodyKeepsMomentumAndFlipsAboutTheIntermediateAx
   const FreeBodyRun rk = free_body_run<RungeKutta45>(sys, t_final, controlled(1e-11, 0.01));
   const FreeBodyRun vie =
       free_body_run<VelocityImplicitEuler>(sys, t_final, controlled(1e-5, 0.01), ImplicitSettings{});
+  const FreeBodyRun vie_fine =
+      free_body_run<VelocityImplicitEuler>(sys, t_final, controlled(1e-6, 0.01), ImplicitSettings{});
   std::cout << "free body: lambda = " << lambda << " /s, ln(w/eps)/lambda = " << t_estimate << " s\n"
             << "  rk45 (1e-11): |dL|/|L0| = " << rk.momentum_drift << ", quaternion " << rk.quaternion_error
             << ", first flip " << rk.first_flip << " s, " << rk.steps << " steps\n"
             << "  vie  (1e-5):  |dL|/|L0| = " << vie.momentum_drift << ", quaternion " << vie.quaternion_error
-            << ", first flip " << vie.first_flip << " s, " << vie.steps << " steps\n";
+            << ", first flip " << vie.first_flip << " s, " << vie.steps << " steps\n"
+            << "  vie  (1e-6):  |dL|/|L0| = " << vie_fine.momentum_drift << ", first flip "
+            << vie_fine.first_flip << " s, " << vie_fine.steps << " steps\n";
   RecordProperty("rk45_momentum_drift", std::to_string(rk.momentum_drift));
   RecordProperty("vie_momentum_drift", std::to_string(vie.momentum_drift));
   RecordProperty("rk45_first_flip", std::to_string(rk.first_flip));
@@ -200,19 +222,32 @@ TEST(ArticulatedIntegration, FreeBodyKeepsMomentumAndFlipsAboutTheIntermediateAx
   // DOPRI5 at 1e-11 over a few thousand steps: global error ~1e-9 of
   // velocities of size 5, so 1e-8 relative on |L| = I2 w.
   EXPECT_LT(rk.momentum_drift, 1e-8);
-  // VIE at 1e-5 (first order; the estimate bounds the local error of the
-  // propagated half steps): the momentum error accumulates over the run;
-  // VIE_MOMENTUM_BOUND, justified by the measured value.
-  EXPECT_LT(vie.momentum_drift, 100 * 1e-5);
+  // VIE is first order and not momentum-conserving: its local errors (each
+  // velocity component within `accuracy` per step) add up over the run, so
+  // |dL| <= steps * accuracy * I1 (the largest moment), relative to
+  // |L0| = I2 w. At 1e-5 that is ~5e-3 (measured ~1.7e-3, i.e. ~170x the
+  // accuracy: a flat "100x accuracy" bound does not hold).
+  const double l0 = i2 * w;
+  EXPECT_LT(vie.momentum_drift, vie.steps * 1e-5 * i1 / l0);
+  EXPECT_LT(vie_fine.momentum_drift, vie_fine.steps * 1e-6 * i1 / l0);
+  // And it converges at first order: with per-step error control h ~
+  // sqrt(accuracy), so the global error goes like sqrt(accuracy) and a 10x
+  // tighter accuracy divides the drift by ~sqrt(10) (measured 3.1).
+  const double ratio = vie.momentum_drift / vie_fine.momentum_drift;
+  EXPECT_GT(ratio, 2.0);
+  EXPECT_LT(ratio, 5.0);
   // Both integrators project the quaternion after every step.
   EXPECT_LT(rk.quaternion_error, 1e-12);
   EXPECT_LT(vie.quaternion_error, 1e-12);
+  EXPECT_LT(vie_fine.quaternion_error, 1e-12);
   // The flip: ln(w/eps)/lambda up to an O(1) factor (the prefactor of the
   // unstable mode and the nonlinear phase of the flip).
   ASSERT_GT(rk.first_flip, 0.0) << "no flip within " << t_final << " s";
   EXPECT_GT(rk.first_flip, 0.5 * t_estimate);
   EXPECT_LT(rk.first_flip, 2.0 * t_estimate);
   ASSERT_GT(vie.first_flip, 0.0) << "no flip within " << t_final << " s";
+  // VIE's dissipation shifts the flip only slightly: within 5% of DOPRI5's
+  // (measured 0.45%).
   EXPECT_NEAR(vie.first_flip / rk.first_flip, 1.0, 0.05);
 }
 
@@ -239,7 +274,14 @@ TEST(ArticulatedIntegration, CompliantChainConvergesToExactAsBushingsStiffen) {
   // acts only on the constrained directions (c_lin P, c_ang on the tilt).
   const double m = 0.1, i_tilt = 0.1 * 0.01 / 3.0, zeta = 0.01;
   std::vector<double> differences;
-  for (double k_lin : {1e3, 1e4, 1e5, 1e6}) {
+  // Four decades, 1e4..1e7 N/m: the compliance error is O(1/k) but its
+  // constant is large for this whipping chain (it grows through the second
+  // as a phase error); measured at t = 1 s: 2.0 rad at 1e3, 0.48 at 1e4,
+  // 0.18 at 1e5, 9.4e-3 at 1e6, 7.7e-4 at 1e7, so 1e-3 needs k_lin = 1e7.
+  // RK45's step count is set by the stability of the stiffest (unexcited)
+  // mode, the tilt of a rod about its own axis (k_ang / Izz, Izz = 1e-6):
+  // ~66000 steps (~7 s) at 1e7.
+  for (double k_lin : {1e4, 1e5, 1e6, 1e7}) {
     BushingParameters b;
     b.k_lin = k_lin;
     b.k_ang = k_lin / 100.0;

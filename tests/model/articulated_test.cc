@@ -16,6 +16,7 @@
 #include "stiffsim/integrators/runge_kutta45.h"
 #include "stiffsim/model/compliant.h"
 #include "stiffsim/model/quaternion.h"
+#include "stiffsim/model/urdf.h"
 #include "articulated_fixtures.h"
 
 namespace stiffsim {
@@ -192,6 +193,97 @@ TEST(Articulated, CompliantJacobiansMatchCentralDifferencesAndAreBlockTridiagona
   const SparseMatrix& K = sys->jacobian_pattern().dF_dq;
   EXPECT_LE(K.nonZeros(), 6 * 3 * 7 * 6);
   EXPECT_LE(sys->jacobian_passes(), 3);
+}
+
+// The shipped tree.urdf: heavy links welded by fixed joints, inertial frames
+// rotated by rpy with products of inertia, revolute joints about different
+// axes and a prismatic slide, loaded through urdfdom.
+RigidTree shipped_tree(bool floating_base) {
+  return load_urdf(std::string(STIFFSIM_SOURCE_DIR) + "/models/tree.urdf",
+                   UrdfOptions{"tree", floating_base}, nullptr);
+}
+
+TEST(Articulated, ShippedTreeMassMatrixAndGravityMatchEnergyDerivatives) {
+  {
+    const bool floating = false;
+    ArticulatedOptions o;
+    o.joint_forces = springs_for(shipped_tree(floating), 2.0, 0.1);
+    const ArticulatedSystem sys(shipped_tree(floating), o);
+    for (unsigned seed : {21u, 22u}) {
+      expect_mass_is_kinetic_hessian(sys, seed);
+      expect_gravity_is_potential_gradient(sys, seed);
+      expect_jacobians_match_differences(sys, seed);
+    }
+  }
+}
+
+TEST(Articulated, SingularMassMatrixIsAnInputError) {
+  // tree.urdf's root link is massless: on a floating base its rotation about
+  // the torso's yaw axis moves nothing that torso_yaw does not.
+  try {
+    const ArticulatedSystem sys(shipped_tree(true), {});
+    FAIL() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("component 'tree': the mass matrix is singular"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Articulated, InertialTermOfTheJacobianMatchesDifferencesOfFMinusMa) {
+  // JacobianRequest::acceleration: K is then d(F - M(q) a)/dq.
+  const ArticulatedSystem sys(shipped_tree(false), {});
+  const Eigen::VectorXd q = random_positions(sys, 31u), v = random_velocities(sys, 32u);
+  const Eigen::VectorXd a = random_velocities(sys, 33u);
+  JacobianRequest request;
+  request.acceleration = a.data();
+  ForceJacobians J = sys.jacobian_pattern();
+  sys.force_jacobians(0.0, q, v, Eigen::VectorXd(), request, &J);
+  const Eigen::MatrixXd K(J.dF_dq);
+  auto residual = [&](const Eigen::VectorXd& qq) {
+    return Eigen::VectorXd(forces_at(sys, qq, v) - dense_mass(sys, qq) * a);
+  };
+  const double eps = 1e-6;
+  double worst = 0.0, scale = 1.0;
+  for (int j = 0; j < q.size(); ++j) {
+    Eigen::VectorXd qp = q, qm = q;
+    qp[j] += eps, qm[j] -= eps;
+    const Eigen::VectorXd col = (residual(qp) - residual(qm)) / (2.0 * eps);
+    worst = std::max(worst, (col - K.col(j)).cwiseAbs().maxCoeff());
+    scale = std::max(scale, col.cwiseAbs().maxCoeff());
+  }
+  EXPECT_LT(worst, 1e-6 * scale);
+  // Without the term K differs: the check above could fail.
+  ForceJacobians plain = sys.jacobian_pattern();
+  sys.force_jacobians(0.0, q, v, Eigen::VectorXd(), JacobianRequest{}, &plain);
+  EXPECT_GT((Eigen::MatrixXd(plain.dF_dq) - K).cwiseAbs().maxCoeff(), 1e-3 * scale);
+}
+
+TEST(Articulated, CompliantColumnsNameTheLinks) {
+  auto sys = make_compliant(serial_chain(2), {}, BushingParameters{});
+  const std::vector<std::string> q = sys->position_names(), v = sys->velocity_names();
+  ASSERT_EQ(q.size(), 14u);
+  EXPECT_EQ(q[0], "chain/link_1/x");
+  EXPECT_EQ(q[6], "chain/link_1/qz");
+  EXPECT_EQ(v[5], "chain/link_1/wz");
+  EXPECT_EQ(v[6], "chain/link_2/vx");
+  const ArticulatedSystem exact(serial_chain(2), {});
+  EXPECT_EQ(exact.position_names()[1], "chain/joint_2");
+}
+
+TEST(Articulated, CompliantChainStartsWhereTheExactChainIs) {
+  // Bushings at rest: no bushing force, so the initial compliant F equals
+  // gravity alone, and the joint coordinates read back the exact angles.
+  ArticulatedOptions o;
+  o.initial_q = Eigen::VectorXd::LinSpaced(5, 0.1, 0.5);
+  auto sys = make_compliant(serial_chain(5), o, BushingParameters{1e6, 0.0, 1e4, 0.0});
+  const State x0 = sys->initial_state();
+  const Eigen::VectorXd q0 = x0.q(sys->dimensions());
+  for (int k = 0; k < 5; ++k) EXPECT_NEAR(sys->bushing_coordinate(k, q0), o.initial_q[k], 1e-12);
+  const Eigen::VectorXd F = forces_at(*sys, q0, x0.v(sys->dimensions()));
+  for (int b = 0; b < 5; ++b) {
+    EXPECT_NEAR(F[6 * b + 2], -0.1 * 9.81, 1e-9);
+    EXPECT_NEAR(F.segment<2>(6 * b).norm(), 0.0, 1e-9);
+  }
 }
 
 // --- Motion ----------------------------------------------------------------

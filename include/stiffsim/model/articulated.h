@@ -70,6 +70,11 @@ struct ArticulatedOptions {
   std::string formulation = "exact";  // for the name in reports: exact | compliant
 };
 
+// World poses of every body of `tree` at q (exact coordinates) and, when v is
+// given, every body's spatial velocity in its own coordinates.
+void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
+                        std::vector<Pose<double>>* world, std::vector<Vec6<double>>* velocities);
+
 class ArticulatedSystem : public System {
  public:
   // Validates the tree and options; throws InputError naming the component.
