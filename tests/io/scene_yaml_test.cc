@@ -1,4 +1,5 @@
 #include "stiffsim/io/scene_yaml.h"
+#include "stiffsim/model/articulated.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -417,6 +418,64 @@ TEST(SceneYaml, FileLevelErrors) {
   EXPECT_EQ(bare.scene->dimensions().nq, 10);
   EXPECT_EQ(bare.scene->initial_state().x[3], 0.3);
   EXPECT_EQ(bare.scene->position_names()[0], "chain_10/joint_1");
+}
+
+}  // namespace
+}  // namespace stiffsim
+
+namespace stiffsim {
+namespace {
+
+TEST(SceneYamlUrdf, SeveralUrdfComponentsShareASceneWithTheirOwnColumnsAndSettings) {
+  const std::string text = R"(components:
+  - name: left
+    type: urdf
+    file: chain_2.urdf
+    initial: {all_joints: 0.3, joints: {joint_2: -0.1}, velocities: {joint_1: 0.5}}
+    joint_stiffness: {joint_1: 4.0}
+  - name: right
+    type: urdf
+    file: chain_10.urdf
+    formulation: compliant
+    bushing: {k_lin: 1.0e5}
+)";
+  const SceneConfig config = parse_scene(text, model_path("two.yaml"), {"right.bushing.k_ang=1e3"});
+  ASSERT_EQ(config.scene->component_count(), 2);
+  const Dimensions d = config.scene->dimensions();
+  EXPECT_EQ(d.nq, 2 + 7 * 10);
+  EXPECT_EQ(d.nv, 2 + 6 * 10);
+  const std::vector<std::string> q = config.scene->position_names();
+  EXPECT_EQ(q[0], "left/joint_1");
+  EXPECT_EQ(q[2], "right/link_1/x");
+  const State x0 = config.scene->initial_state();
+  EXPECT_EQ(x0.x[0], 0.3);
+  EXPECT_EQ(x0.x[1], -0.1);
+  EXPECT_EQ(x0.x[d.nq], 0.5);
+  const auto& right = dynamic_cast<const ArticulatedSystem&>(config.scene->component(1));
+  EXPECT_EQ(right.options().bushings.at(0).k_lin, 1e5);
+  EXPECT_EQ(right.options().bushings.at(0).k_ang, 1e3);
+  const auto& left = dynamic_cast<const ArticulatedSystem&>(config.scene->component(0));
+  EXPECT_EQ(left.options().joint_forces.at(0).stiffness, 4.0);
+  EXPECT_EQ(left.options().joint_forces.at(1).stiffness, 0.0);
+}
+
+TEST(SceneYamlUrdf, UrdfSettingErrorsNameTheKey) {
+  auto error = [](const std::string& extra) {
+    try {
+      parse_scene("components:\n  - name: c\n    type: urdf\n    file: chain_2.urdf\n" + extra,
+                  model_path("bad.yaml"));
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("    joint_stiffness: {joint_9: 1.0}\n").find("unknown joint 'joint_9'"), std::string::npos);
+  EXPECT_NE(error("    joint_damping: -1\n").find("joint_damping must be >= 0"), std::string::npos);
+  EXPECT_NE(error("    bushing: {k_lin: 1}\n").find("bushing applies to formulation: compliant only"),
+            std::string::npos);
+  EXPECT_NE(error("    initial: {joints: {joint_1: [1, 2]}}\n").find("initial.joints.joint_1 must be a number"),
+            std::string::npos);
+  EXPECT_NE(error("    formulation: loose\n").find("formulation"), std::string::npos);
 }
 
 }  // namespace
