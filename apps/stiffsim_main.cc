@@ -10,6 +10,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <iostream>
 #include <limits>
 #include <memory>
 #include <string>
@@ -23,6 +24,7 @@
 #include "stiffsim/io/trajectory_writer.h"
 #include "stiffsim/io/vtk_writer.h"
 #include "stiffsim/linalg/blas_threads.h"
+#include "stiffsim/reports/reports.h"
 
 namespace stiffsim {
 namespace {
@@ -451,18 +453,40 @@ int main(int argc, char** argv) {
       "run", "Simulate a scene and write its trajectory (CSV), statistics (JSON) and frames (VTK)");
   add_run_options(run, &options);
 
+  ReportOptions bench_options;
+  std::string report;
+  CLI::App* bench = app.add_subcommand(
+      "bench", "Run a report: work-precision, scaling or stability (CSV and Markdown; "
+               "bench/plot_reports.py draws the plots)");
+  bench->add_option("report", report, "precision | scaling | stability")
+      ->required()
+      ->check(CLI::IsMember({"precision", "scaling", "stability"}));
+  bench->add_flag("--quick", bench_options.quick, "The small preset (minutes on 2 cores; CI runs it)");
+  bench->add_option("--out", bench_options.out_dir, "Directory for the CSV and Markdown files")
+      ->capture_default_str();
+  bench_options.models_dir = STIFFSIM_MODELS_DIR;
+  bench->add_option("--models", bench_options.models_dir,
+                    "Directory with chain_N.urdf (for MuJoCo, which loads the file)")
+      ->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::Success& e) {
     return app.exit(e);  // --help, --version
   } catch (const CLI::ParseError& e) {
     std::fprintf(stderr, "stiffsim: error: %s\nRun 'stiffsim %s--help' for the options.\n",
-                 e.what(), run->parsed() ? "run " : "");
+                 e.what(), run->parsed() ? "run " : bench->parsed() ? "bench " : "");
     return kUsageExitCode;
   }
 
   set_blas_threads(options.blas_threads);
   try {
+    if (bench->parsed()) {
+      bench_options.log = &std::cerr;
+      if (report == "precision") return run_precision_report(bench_options);
+      if (report == "scaling") return run_scaling_report(bench_options);
+      return run_stability_report(bench_options);
+    }
     return run_command(options);
   } catch (const InputError& e) {
     std::fprintf(stderr, "stiffsim: error: %s\n", e.what());

@@ -81,4 +81,24 @@ RigidInertia transform(const RigidInertia& inertia, const Eigen::Isometry3d& pos
   return out;
 }
 
+RigidTree make_chain_tree(int links, const std::string& name) {
+  RigidTree t;
+  t.name = name;
+  t.file = "chain_" + std::to_string(links) + " (built in code)";
+  for (int i = 0; i < links; ++i) {
+    TreeBody b;
+    b.link = "link_" + std::to_string(i + 1);
+    b.joint = "joint_" + std::to_string(i + 1);
+    b.parent = i - 1;
+    b.type = JointType::kRevolute;
+    b.axis = Eigen::Vector3d::UnitY();
+    if (i > 0) b.placement.translation() = Eigen::Vector3d(0.0, 0.0, -0.1);
+    b.inertia.mass = 0.1;
+    b.inertia.com = Eigen::Vector3d(0.0, 0.0, -0.05);
+    b.inertia.inertia = Eigen::Vector3d(0.1 * 0.01 / 12.0, 0.1 * 0.01 / 12.0, 1e-6).asDiagonal();
+    t.bodies.push_back(b);
+  }
+  return t;
+}
+
 }  // namespace stiffsim

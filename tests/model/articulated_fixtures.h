@@ -11,24 +11,7 @@ namespace stiffsim {
 
 // MODELS.md's shipped chain: n rods of 0.1 m and 0.1 kg hanging along -z,
 // revolute about y.
-inline RigidTree serial_chain(int n) {
-  RigidTree t;
-  t.name = "chain";
-  for (int i = 0; i < n; ++i) {
-    TreeBody b;
-    b.link = "link_" + std::to_string(i + 1);
-    b.joint = "joint_" + std::to_string(i + 1);
-    b.parent = i - 1;
-    b.type = JointType::kRevolute;
-    b.axis = Eigen::Vector3d::UnitY();
-    if (i > 0) b.placement.translation() = Eigen::Vector3d(0.0, 0.0, -0.1);
-    b.inertia.mass = 0.1;
-    b.inertia.com = Eigen::Vector3d(0.0, 0.0, -0.05);
-    b.inertia.inertia = Eigen::Vector3d(0.1 * 0.01 / 12.0, 0.1 * 0.01 / 12.0, 1e-6).asDiagonal();
-    t.bodies.push_back(b);
-  }
-  return t;
-}
+inline RigidTree serial_chain(int n) { return make_chain_tree(n); }
 
 // A Y-shaped tree with joints about different axes (one prismatic, one
 // planar), rotated joint frames, off-centre masses and inertia tensors with

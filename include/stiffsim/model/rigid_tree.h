@@ -49,6 +49,11 @@ struct RigidTree {
   std::vector<TreeBody> bodies;
 };
 
+// MODELS.md "Shipped chain models": `links` rods of 0.1 m and 0.1 kg hanging
+// along -z, revolute about y, joint i+1 at (0, 0, -0.1) in link i: the tree
+// models/chain_N.urdf loads to, built in code for any N.
+RigidTree make_chain_tree(int links, const std::string& name = "chain");
+
 // Combines two sets of mass properties given in the same frame.
 RigidInertia combine(const RigidInertia& a, const RigidInertia& b);
 // `inertia` expressed in a frame whose pose in the new frame is `pose`.

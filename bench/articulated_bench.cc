@@ -1,0 +1,78 @@
+// The kernels of an articulated step: F by recursive Newton-Euler, M by the
+// composite rigid body algorithm, the exact K and D by seeded forward-mode
+// differentiation, for chains in reduced coordinates (dense) and as free
+// bodies with bushings (sparse), and one VIE step of each.
+//
+//   build/bench/articulated_bench --benchmark_repetitions=5
+//     --benchmark_report_aggregates_only=true
+
+#include <benchmark/benchmark.h>
+
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/reports/bench_scenes.h"
+
+namespace stiffsim {
+namespace {
+
+std::unique_ptr<ArticulatedSystem> make_system(int links, bool compliant) {
+  ArticulatedOptions o;
+  o.initial_q = Eigen::VectorXd::Constant(links, 0.05);
+  if (compliant) return make_compliant(make_chain_tree(links), o, BushingParameters{});
+  return std::make_unique<ArticulatedSystem>(make_chain_tree(links), o);
+}
+
+void BM_Forces(benchmark::State& state) {
+  const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const State x = sys->initial_state();
+  const Dimensions d = sys->dimensions();
+  Eigen::VectorXd F(d.nv);
+  for (auto _ : state) {
+    sys->forces(0.0, x.q(d), x.v(d), x.z(d), F);
+    benchmark::DoNotOptimize(F.data());
+  }
+}
+
+void BM_MassMatrix(benchmark::State& state) {
+  const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const State x = sys->initial_state();
+  const Dimensions d = sys->dimensions();
+  SparseMatrix M = sys->mass_matrix_pattern();
+  for (auto _ : state) {
+    sys->mass_matrix(x.q(d), &M);
+    benchmark::DoNotOptimize(M.valuePtr());
+  }
+}
+
+void BM_Jacobians(benchmark::State& state) {
+  const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const State x = sys->initial_state();
+  const Dimensions d = sys->dimensions();
+  ForceJacobians J = sys->jacobian_pattern();
+  for (auto _ : state) {
+    sys->force_jacobians(0.0, x.q(d), x.v(d), x.z(d), JacobianRequest{}, &J);
+    benchmark::DoNotOptimize(J.dF_dq.valuePtr());
+  }
+  state.counters["passes"] = sys->jacobian_passes();
+}
+
+void BM_VieStep(benchmark::State& state) {
+  const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  IntegratorSettings s;
+  s.fixed_step = true;
+  s.max_step = 1e-3;
+  VelocityImplicitEuler vie(*sys, s, ImplicitSettings{});
+  vie.initialize(sys->initial_state());
+  vie.integrate_to(2e-3);  // first factorization and symbolic analysis out of the loop
+  for (auto _ : state) vie.integrate_to(vie.state().t + 1e-3);
+}
+
+// Args: links, compliant (0 exact, 1 compliant).
+BENCHMARK(BM_Forces)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_MassMatrix)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Jacobians)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_VieStep)->Args({10, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace stiffsim
+
+BENCHMARK_MAIN();

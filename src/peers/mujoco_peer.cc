@@ -1,0 +1,374 @@
+// MuJoCo as a peer (include/stiffsim/peers/mujoco_peer.h).
+//
+// MuJoCo reads URDF itself (mj_loadXML converts <robot> to its own model).
+// Before it sees the file, the text is changed in memory (a one-file mjVFS,
+// nothing is written next to the user's URDF):
+// - <visual> and <collision> elements are removed: their meshes (package://
+//   URIs) do not exist here and geometry does not affect the dynamics;
+//   with no geoms, MuJoCo takes every body's mass and inertia from the
+//   URDF's <inertial> as given (inertiafromgeom never has a geom to use);
+// - a <mujoco><compiler .../></mujoco> block keeps every link as its own
+//   body (fusestatic="false": a fixed joint becomes a body without joints,
+//   welded to its parent, which is what stiffsim's welding computes too) and
+//   leaves inertias unchanged (balanceinertia="false", no bounds).
+// Everything else is set on the compiled mjModel: gravity, time step,
+// integrator, contacts and limits off, armature and frictionloss 0, the
+// joint springs and total damping of the problem.
+
+#include "stiffsim/peers/mujoco_peer.h"
+
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+#ifdef STIFFSIM_HAVE_MUJOCO
+#include <mujoco/mujoco.h>
+#endif
+
+namespace stiffsim {
+
+#ifndef STIFFSIM_HAVE_MUJOCO
+
+bool mujoco_available() { return false; }
+
+PeerRun run_mujoco(const MujocoProblem&) {
+  throw std::runtime_error("stiffsim was built without MuJoCo");
+}
+
+#else
+
+bool mujoco_available() { return true; }
+
+namespace {
+
+// Position of the next `<name` tag (followed by white space, '>' or '/')
+// at or after `from`, skipping XML comments; npos when there is none.
+size_t find_tag(const std::string& xml, const std::string& name, size_t from) {
+  const std::string open = "<" + name;
+  size_t pos = from;
+  while (pos < xml.size()) {
+    const size_t comment = xml.find("<!--", pos);
+    const size_t tag = xml.find(open, pos);
+    if (tag == std::string::npos) return std::string::npos;
+    if (comment != std::string::npos && comment < tag) {
+      const size_t end = xml.find("-->", comment + 4);
+      if (end == std::string::npos) return std::string::npos;
+      pos = end + 3;
+      continue;
+    }
+    const size_t after = tag + open.size();
+    if (after < xml.size()) {
+      const char c = xml[after];
+      if (c == '>' || c == '/' || c == ' ' || c == '\t' || c == '\n' || c == '\r') return tag;
+    }
+    pos = after;
+  }
+  return std::string::npos;
+}
+
+// Removes every <name .../> and <name ...>...</name> element (not nested in
+// itself, as URDF's visual and collision never are).
+void strip_elements(std::string* xml, const std::string& name) {
+  size_t pos = 0;
+  while ((pos = find_tag(*xml, name, pos)) != std::string::npos) {
+    const size_t tag_end = xml->find('>', pos);
+    if (tag_end == std::string::npos) return;  // broken XML: MuJoCo will say so
+    size_t end;
+    if ((*xml)[tag_end - 1] == '/') {
+      end = tag_end + 1;
+    } else {
+      const std::string close = "</" + name;
+      const size_t c = xml->find(close, tag_end);
+      if (c == std::string::npos) return;
+      const size_t ce = xml->find('>', c);
+      if (ce == std::string::npos) return;
+      end = ce + 1;
+    }
+    xml->erase(pos, end - pos);
+  }
+}
+
+std::string prepare_urdf(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("MuJoCo peer: cannot read URDF file '" + path + "'");
+  std::ostringstream text;
+  text << in.rdbuf();
+  std::string xml = text.str();
+  strip_elements(&xml, "visual");
+  strip_elements(&xml, "collision");
+  const size_t robot = find_tag(xml, "robot", 0);
+  if (robot == std::string::npos)
+    throw std::runtime_error("MuJoCo peer: '" + path + "' has no <robot> element");
+  const size_t robot_end = xml.find('>', robot);
+  if (robot_end == std::string::npos || xml[robot_end - 1] == '/')
+    throw std::runtime_error("MuJoCo peer: '" + path + "' has an empty <robot> element");
+  if (find_tag(xml, "mujoco", robot_end) == std::string::npos) {
+    xml.insert(robot_end + 1,
+               "\n  <mujoco><compiler discardvisual=\"true\" fusestatic=\"false\""
+               " balanceinertia=\"false\" boundmass=\"0\" boundinertia=\"0\""
+               " angle=\"radian\"/></mujoco>\n");
+  }
+  return xml;
+}
+
+struct ModelDeleter {
+  void operator()(mjModel* m) const { mj_deleteModel(m); }
+};
+struct DataDeleter {
+  void operator()(mjData* d) const { mj_deleteData(d); }
+};
+struct VfsDeleter {
+  void operator()(mjVFS* v) const {
+    mj_deleteVFS(v);
+    delete v;
+  }
+};
+
+std::string format_number(double x) {
+  std::ostringstream s;
+  s << x;
+  return s.str();
+}
+
+// The first warning MuJoCo raised that makes the run meaningless, or "".
+std::string bad_warning(const mjData* d) {
+  static const struct {
+    int index;
+    const char* text;
+  } kWarnings[] = {{mjWARN_BADQACC, "bad qacc (non-finite or huge acceleration)"},
+                   {mjWARN_BADQPOS, "bad qpos"},
+                   {mjWARN_BADQVEL, "bad qvel"},
+                   {mjWARN_INERTIA, "(near) singular inertia matrix"}};
+  for (const auto& w : kWarnings)
+    if (d->warning[w.index].number > 0) return w.text;
+  return "";
+}
+
+// MuJoCo reports through two process-wide hooks. Its default warning hook
+// prints and appends to MUJOCO_LOG.TXT in the working directory, its default
+// error hook exits the process. While run_mujoco runs, warnings are collected
+// into the failure message and errors become std::runtime_error; the previous
+// hooks come back afterwards. (So run_mujoco is not for concurrent use from
+// several threads.)
+thread_local std::string* g_warnings = nullptr;
+
+void collect_warning(const char* text) {
+  if (!g_warnings) return;
+  std::string line(text ? text : "");
+  while (!line.empty() && (line.back() == '\n' || line.back() == ' ')) line.pop_back();
+  if (!g_warnings->empty()) *g_warnings += "; ";
+  *g_warnings += line;
+}
+
+[[noreturn]] void throw_error(const char* text) {
+  throw std::runtime_error(std::string("MuJoCo error: ") + (text ? text : ""));
+}
+
+class MujocoHooks {
+ public:
+  explicit MujocoHooks(std::string* warnings)
+      : warning_(mju_user_warning), error_(mju_user_error), previous_(g_warnings) {
+    g_warnings = warnings;
+    mju_user_warning = collect_warning;
+    mju_user_error = throw_error;
+  }
+  ~MujocoHooks() {
+    mju_user_warning = warning_;
+    mju_user_error = error_;
+    g_warnings = previous_;
+  }
+  MujocoHooks(const MujocoHooks&) = delete;
+  MujocoHooks& operator=(const MujocoHooks&) = delete;
+
+ private:
+  void (*warning_)(const char*);
+  void (*error_)(const char*);
+  std::string* previous_;
+};
+
+}  // namespace
+
+PeerRun run_mujoco(const MujocoProblem& problem) {
+  std::string warnings;
+  MujocoHooks hooks(&warnings);
+  const size_t n = problem.joints.size();
+  auto check_size = [&](const std::vector<double>& values, const char* what) {
+    if (values.size() != n)
+      throw std::runtime_error(std::string("MuJoCo peer: ") + what + " has " +
+                               std::to_string(values.size()) + " values for " + std::to_string(n) +
+                               " joints");
+  };
+  check_size(problem.initial_q, "initial_q");
+  check_size(problem.initial_v, "initial_v");
+  check_size(problem.stiffness, "stiffness");
+  check_size(problem.rest, "rest");
+  check_size(problem.damping, "damping");
+  if (!(problem.step > 0.0) || !std::isfinite(problem.step))
+    throw std::runtime_error("MuJoCo peer: the step must be positive");
+
+  int integrator;
+  std::string integrator_text, method;
+  if (problem.integrator == "implicit") {
+    integrator = mjINT_IMPLICIT;
+    integrator_text = "implicit (joint springs explicit, damping implicit)";
+    method = "mujoco-implicit";
+  } else if (problem.integrator == "RK4" || problem.integrator == "rk4") {
+    integrator = mjINT_RK4;
+    integrator_text = "RK4";
+    method = "mujoco-rk4";
+  } else if (problem.integrator == "Euler" || problem.integrator == "euler") {
+    integrator = mjINT_EULER;
+    integrator_text = "Euler (semi-implicit; damping implicit)";
+    method = "mujoco-euler";
+  } else {
+    throw std::runtime_error("MuJoCo peer: unknown integrator '" + problem.integrator +
+                             "' (implicit, RK4, Euler)");
+  }
+
+  // Load the URDF from memory.
+  const std::string xml = prepare_urdf(problem.urdf_path);
+  std::unique_ptr<mjVFS, VfsDeleter> vfs(new mjVFS);
+  mj_defaultVFS(vfs.get());
+  const char* kName = "stiffsim_mujoco_peer.urdf";
+  if (mj_makeEmptyFileVFS(vfs.get(), kName, static_cast<int>(xml.size())) != 0)
+    throw std::runtime_error("MuJoCo peer: cannot make a virtual file for '" +
+                             problem.urdf_path + "'");
+  const int file = mj_findFileVFS(vfs.get(), kName);
+  if (file < 0)
+    throw std::runtime_error("MuJoCo peer: virtual file lost for '" + problem.urdf_path + "'");
+  std::memcpy(vfs->filedata[file], xml.data(), xml.size());
+
+  char error[1024] = "";
+  std::unique_ptr<mjModel, ModelDeleter> model;
+  try {
+    model.reset(mj_loadXML(kName, vfs.get(), error, sizeof error));
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error("MuJoCo could not load '" + problem.urdf_path + "': " + e.what());
+  }
+  if (!model)
+    throw std::runtime_error("MuJoCo could not load '" + problem.urdf_path + "': " + error);
+  mjModel* m = model.get();
+
+  // Joints.
+  std::vector<int> qadr(n), dadr(n);
+  for (size_t i = 0; i < n; ++i) {
+    const std::string& name = problem.joints[i];
+    const int j = mj_name2id(m, mjOBJ_JOINT, name.c_str());
+    if (j < 0)
+      throw std::runtime_error("MuJoCo peer: joint '" + name + "' of '" + problem.urdf_path +
+                               "' is not in MuJoCo's model");
+    if (m->jnt_type[j] != mjJNT_HINGE && m->jnt_type[j] != mjJNT_SLIDE)
+      throw std::runtime_error("MuJoCo peer: joint '" + name + "' of '" + problem.urdf_path +
+                               "' is not a 1-DOF hinge or slide joint in MuJoCo's model");
+    qadr[i] = m->jnt_qposadr[j];
+    dadr[i] = m->jnt_dofadr[j];
+    m->jnt_stiffness[j] = problem.stiffness[i];
+    m->jnt_limited[j] = 0;
+    m->qpos_spring[qadr[i]] = problem.rest[i];
+    m->dof_damping[dadr[i]] = problem.damping[i];
+  }
+  for (int k = 0; k < m->nv; ++k) {
+    m->dof_armature[k] = 0.0;
+    m->dof_frictionloss[k] = 0.0;
+  }
+  for (int k = 0; k < 3; ++k) m->opt.gravity[k] = problem.gravity[k];
+  m->opt.timestep = problem.step;
+  m->opt.integrator = integrator;
+  // Equality constraints too: MuJoCo makes one of every URDF <mimic>, which
+  // stiffsim ignores.
+  m->opt.disableflags |= mjDSBL_CONTACT | mjDSBL_LIMIT | mjDSBL_FRICTIONLOSS | mjDSBL_EQUALITY;
+
+  std::unique_ptr<mjData, DataDeleter> data(mj_makeData(m));
+  if (!data) throw std::runtime_error("MuJoCo peer: mj_makeData failed");
+  mjData* d = data.get();
+  mj_resetData(m, d);
+  for (size_t i = 0; i < n; ++i) {
+    d->qpos[qadr[i]] = problem.initial_q[i];
+    d->qvel[dadr[i]] = problem.initial_v[i];
+  }
+  mj_forward(m, d);
+
+  PeerRun run;
+  run.method = method;
+  {
+    std::ostringstream s;
+    s << "MuJoCo " << mj_versionString() << " " << integrator_text
+      << ", h = " << format_number(problem.step)
+      << ", contacts, limits, frictionloss and equality constraints (URDF mimic) off, armature 0,"
+         " URDF geometry stripped"
+         " (inertias from <inertial>), "
+      << m->nq << " qpos / " << m->nv << " dofs";
+    run.settings = s.str();
+  }
+
+  auto record = [&](double t) {
+    Eigen::VectorXd x(2 * n);
+    for (size_t i = 0; i < n; ++i) {
+      x[i] = d->qpos[qadr[i]];
+      x[n + i] = d->qvel[dadr[i]];
+    }
+    run.times.push_back(t);
+    run.samples.push_back(std::move(x));
+  };
+  auto state_finite = [&]() {
+    for (int k = 0; k < m->nq; ++k)
+      if (!std::isfinite(d->qpos[k])) return false;
+    for (int k = 0; k < m->nv; ++k)
+      if (!std::isfinite(d->qvel[k])) return false;
+    return true;
+  };
+
+  const double h = problem.step;
+  size_t next_sample = 0;
+  // Samples before the start are never reached.
+  while (next_sample < problem.sample_times.size() &&
+         problem.sample_times[next_sample] < d->time - 0.5 * h)
+    ++next_sample;
+  const double t_end = problem.t_final;
+
+  const auto start = std::chrono::steady_clock::now();
+  for (;;) {
+    while (next_sample < problem.sample_times.size() &&
+           std::abs(d->time - problem.sample_times[next_sample]) < 0.5 * h) {
+      record(problem.sample_times[next_sample]);
+      ++next_sample;
+    }
+    // Sample times that fall between steps by more than h/2 of either end
+    // are skipped: a run reports only times it reached.
+    while (next_sample < problem.sample_times.size() &&
+           problem.sample_times[next_sample] < d->time - 0.5 * h)
+      ++next_sample;
+    if (d->time >= t_end - 0.5 * h) break;
+    const double t_before = d->time;
+    mj_step(m, d);
+    ++run.steps;
+    const std::string warning = bad_warning(d);
+    if (!warning.empty() || !state_finite()) {
+      run.failed = true;
+      std::ostringstream s;
+      s << "MuJoCo " << integrator_text << " failed in the step from t = " << t_before
+        << " to t = " << t_before + h << ": "
+        << (warning.empty() ? std::string("non-finite qpos/qvel") : "warning: " + warning);
+      if (!warnings.empty()) s << " (MuJoCo: " << warnings << ")";
+      run.message = s.str();
+      break;
+    }
+  }
+  run.wall_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // RK4 makes four evaluations of the dynamics per step; Euler and implicit one.
+  run.rhs_evaluations = run.steps * (integrator == mjINT_RK4 ? 4 : 1);
+  if (integrator == mjINT_IMPLICIT) {
+    run.jacobian_evaluations = run.steps;
+    run.linear_setups = run.steps;
+  }
+  return run;
+}
+
+#endif  // STIFFSIM_HAVE_MUJOCO
+
+}  // namespace stiffsim

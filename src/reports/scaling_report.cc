@@ -1,0 +1,146 @@
+// Time per step against the number of degrees of freedom: particle ropes,
+// cloth, compliant chains (sparse) and exact chains (dense), VIE against IE,
+// with the split of a step's time and the fitted exponent.
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <sstream>
+
+#include "stiffsim/error.h"
+#include "stiffsim/reports/method_run.h"
+#include "stiffsim/reports/reports.h"
+
+namespace stiffsim {
+namespace {
+
+struct Family {
+  std::string name;
+  std::vector<int> sizes;  // the builder's size parameter
+  std::function<BenchScene(int)> build;
+  double step;
+  int ie_max_dofs;  // IE only up to this size (it is the slow one)
+};
+
+struct Point {
+  std::string family, method;
+  int dofs = 0;
+  MethodRun run;
+};
+
+}  // namespace
+
+int run_scaling_report(const ReportOptions& options) {
+  namespace fs = std::filesystem;
+  create_report_directory(options.out_dir);
+  auto say = [&](const std::string& line) {
+    if (options.log) *options.log << line << std::endl;
+  };
+  const bool quick = options.quick;
+  const int steps = quick ? 5 : 10;
+  std::vector<Family> families;
+  families.push_back({"particle rope", quick ? std::vector<int>{34, 334, 3334} : std::vector<int>{34, 334, 3334, 33334},
+                      [](int n) { return rope_scene(n, 1e5, 1.0); }, 1e-3, quick ? 10000 : 100000});
+  families.push_back({"cloth", quick ? std::vector<int>{6, 18, 58} : std::vector<int>{6, 18, 58, 100, 183},
+                      [](int n) { return cloth_scene(n, 1e3, 1.0); }, 1.0 / 60.0, quick ? 10000 : 31000});
+  families.push_back({"compliant chain",
+                      quick ? std::vector<int>{17, 167, 1667} : std::vector<int>{17, 167, 1667, 16667},
+                      [](int n) { return compliant_chain_scene(n, 0.05, 1e6, 1e4, 1.0); }, 1e-3,
+                      quick ? 10000 : 10000});
+  families.push_back({"exact chain", quick ? std::vector<int>{10, 30, 100} : std::vector<int>{10, 30, 100, 300, 1000},
+                      [](int n) { return chain_scene(n, 0.05, 0.0, 1.0); }, 1e-3, quick ? 100 : 300});
+
+  std::vector<Point> points;
+  for (const Family& f : families) {
+    for (int size : f.sizes) {
+      BenchScene s = f.build(size);
+      s.t_final = steps * f.step;
+      s.sample_period = s.t_final;
+      for (const char* method : {"vie", "ie"}) {
+        if (std::string(method) == "ie" && s.dofs() > f.ie_max_dofs) continue;
+        BenchRunOptions o;
+        o.wall_budget_seconds = quick ? 30.0 : 300.0;
+        const MethodRun run = run_stiffsim(s, {method, true, f.step}, o);
+        say("scaling: " + f.name + " " + std::to_string(s.dofs()) + " DOFs, " + method + ": " +
+            format_number("%.3f", 1e3 * (run.wall_seconds - run.first_step_wall_seconds) / std::max(1L, run.steps - 1)) +
+            " ms/step after the first" +
+            (run.finished ? "" : " (" + run.message + ")"));
+        points.push_back({f.name, method, s.dofs(), run});
+      }
+    }
+  }
+
+  std::ostringstream md;
+  md << "# Scaling\n\nMachine: " << machine_description() << ".\n\n"
+     << "Each point: the mean of steps 2.." << steps << " of a run of fixed steps (h = 1 ms for ropes and chains, 1/60 s for cloth) from "
+     << "the scene's initial state, time per step split as the statistics count it. Memory: the "
+     << "process's resident set at the end of the run.\n\n"
+     << "| family | method | DOFs | ms/step | jacobian | assembly | factorization | solve | derivatives "
+     << "| factorizations/step | nnz matrix | nnz factor | MB | solver |\n"
+     << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+  std::ofstream csv(fs::path(options.out_dir) / "scaling.csv");
+  csv << "family,method,dofs,steps,ms_per_step,jacobian_ms,assembly_ms,factorization_ms,solve_ms,derivative_ms,"
+         "factorizations_per_step,nnz_matrix,nnz_factor,resident_mb,linear_solver,finished\n";
+  // Steps after the first: the first pays the symbolic analysis and the
+  // first Jacobian and factorization once per run.
+  auto per_step = [](const MethodRun& r) {
+    return (r.wall_seconds - r.first_step_wall_seconds) / std::max(1L, r.steps - 1);
+  };
+  for (const Point& p : points) {
+    IntegratorStatistics st = p.run.stats;
+    const IntegratorStatistics& f = p.run.first_step_stats;
+    st.jacobian_seconds -= f.jacobian_seconds;
+    st.assembly_seconds -= f.assembly_seconds;
+    st.factorization_seconds -= f.factorization_seconds;
+    st.solve_seconds -= f.solve_seconds;
+    st.derivative_seconds -= f.derivative_seconds;
+    st.iteration_matrix_factorizations -= f.iteration_matrix_factorizations;
+    const double n = std::max(1L, p.run.steps - 1);
+    auto ms = [&](double seconds) { return format_number("%.4f", 1e3 * seconds / n); };
+    csv << csv_field(p.family) << "," << p.method << "," << p.dofs << "," << p.run.steps << ","
+        << format_number("%.4f", 1e3 * per_step(p.run)) << "," << ms(st.jacobian_seconds) << "," << ms(st.assembly_seconds) << ","
+        << ms(st.factorization_seconds) << "," << ms(st.solve_seconds) << "," << ms(st.derivative_seconds) << ","
+        << format_number("%.2f", st.iteration_matrix_factorizations / n) << "," << st.iteration_matrix_nonzeros << ","
+        << st.factor_nonzeros << "," << format_number("%.1f", p.run.resident_mb) << "," << csv_field(p.run.linear_solver)
+        << "," << (p.run.finished ? 1 : 0) << "\n";
+    md << "| " << p.family << " | " << p.method << " | " << p.dofs << " | " << format_number("%.4f", 1e3 * per_step(p.run)) << " | "
+       << ms(st.jacobian_seconds) << " | " << ms(st.assembly_seconds) << " | " << ms(st.factorization_seconds)
+       << " | " << ms(st.solve_seconds) << " | " << ms(st.derivative_seconds) << " | "
+       << format_number("%.2f", st.iteration_matrix_factorizations / n) << " | " << st.iteration_matrix_nonzeros << " | "
+       << st.factor_nonzeros << " | " << format_number("%.0f", p.run.resident_mb) << " | " << p.run.linear_solver
+       << (p.run.finished ? "" : " (" + p.run.message + ")") << " |\n";
+  }
+  md << "\n## Fitted exponents (time per step ~ DOFs^p, VIE, sizes >= 1000 DOFs)\n\n| family | p | points |\n|---|---|---|\n";
+  for (const Family& f : families) {
+    std::vector<double> x, y;
+    for (const Point& p : points) {
+      if (p.family == f.name && p.method == "vie" && p.dofs >= 900 && p.run.finished) {
+        x.push_back(p.dofs);
+        y.push_back(per_step(p.run));
+      }
+    }
+    md << "| " << f.name << " | " << (x.size() >= 2 ? format_number("%.2f", fitted_exponent(x, y)) : "-") << " | "
+       << x.size() << " |\n";
+  }
+  md << "\nGoal: particle ropes and compliant chains at an exponent of at most 1.1 between 10^3 and 10^5 DOFs"
+     << (quick ? " (the quick preset stops at 10^4)." : ".") << "\n\n## VIE against IE, time per step\n\n"
+     << "| family | DOFs | VIE ms | IE ms | IE / VIE |\n|---|---|---|---|---|\n";
+  for (const Point& p : points) {
+    if (p.method != "vie") continue;
+    for (const Point& q : points) {
+      if (q.method == "ie" && q.family == p.family && q.dofs == p.dofs) {
+        const double a = per_step(p.run);
+        const double b = per_step(q.run);
+        md << "| " << p.family << " | " << p.dofs << " | " << format_number("%.3f", 1e3 * a) << " | "
+           << format_number("%.3f", 1e3 * b) << " | " << format_number("%.1f", b / a) << " |\n";
+      }
+    }
+  }
+  std::ofstream(fs::path(options.out_dir) / "scaling.md") << md.str();
+  say("scaling: wrote " + (fs::path(options.out_dir) / "scaling.csv").string() + " and scaling.md");
+  return 0;
+}
+
+}  // namespace stiffsim
