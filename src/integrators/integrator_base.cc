@@ -23,6 +23,15 @@ constexpr double kHysteresisHigh = 1.2;
 constexpr double kSubdivision = 0.5;
 // Growth of max |x| in one fixed explicit step taken as a blow-up.
 constexpr double kBlowUpGrowth = 1e3;
+// The slow blow-up of a fixed explicit step (a growth of a few times per step
+// passes the test above for many steps), seen in the energy of a passive
+// scene: a gain of more than ten times max(|E0|, kEnergyFloor) that is most
+// of the kinetic energy (so it is not the bounded energy error of a stable
+// run, a small fraction of the energy in motion, and does not depend on
+// where the potential has its zero).
+constexpr double kEnergyBlowUp = 10.0;
+constexpr double kSpuriousKineticShare = 0.5;
+constexpr double kEnergyFloor = 1e-6;
 
 }  // namespace
 
@@ -61,6 +70,8 @@ void IntegratorBase::initialize(const State& initial) {
   state_ = initial;
   previous_ = initial;
   stats_ = IntegratorStatistics{};
+  watch_energy_ = is_explicit() && settings_.fixed_step && caps_.passive && caps_.has_energy;
+  initial_energy_ = watch_energy_ ? system_.energy(initial) : 0.0;
   candidate_.resize(dims_.nx());
   error_.resize(estimating_error() ? dims_.nx() : 0);
   mass_matrix_ = system_.mass_matrix_pattern();
@@ -171,6 +182,25 @@ void IntegratorBase::step_at_most(double t_limit) {
         fail_step(h, growth.str(),
                   ": the explicit method is unstable at this step size (the scene is too stiff "
                   "for it; use vie or ie)");
+      }
+      if (watch_energy_) {
+        // A passive scene cannot gain energy; a hundredfold gain is
+        // instability growing a few times per step, not motion.
+        State next(t0 + h, candidate_);
+        const double e = system_.energy(next);
+        const double gain = e - initial_energy_;
+        const auto v = candidate_.segment(dims_.nq, dims_.nv);
+        const double kinetic = 0.5 * v.dot(mass_matrix_at(candidate_.segment(0, dims_.nq)) * v);
+        if (!std::isfinite(e) ||
+            (gain > kEnergyBlowUp * std::max(std::abs(initial_energy_), kEnergyFloor) &&
+             gain > kSpuriousKineticShare * kinetic)) {
+          std::ostringstream gain;
+          gain.precision(4);
+          gain << "energy grew from " << initial_energy_ << " J to " << e << " J in a passive scene";
+          fail_step(h, gain.str(),
+                    ": the explicit method is unstable at this step size (the scene is too stiff "
+                    "for it; use vie or ie)");
+        }
       }
     }
     accept(h);

@@ -13,10 +13,11 @@ std::unique_ptr<Scene> single(const std::string& name, std::unique_ptr<System> s
 }
 }  // namespace
 
-BenchScene cloth_scene(int nx, double stretch_k, double t_final) {
+BenchScene cloth_scene(int nx, double stretch_k, double t_final, double size, double total_mass) {
   ClothSpec spec;
   spec.nx = spec.ny = nx;
-  spec.total_mass = 0.4;
+  spec.width = spec.height = size;
+  spec.total_mass = total_mass;
   spec.stretch = SpringParameters{stretch_k, 0.5};
   spec.shear = SpringParameters{100.0, 0.1};
   spec.bend = SpringParameters{10.0, 0.05};
@@ -29,11 +30,11 @@ BenchScene cloth_scene(int nx, double stretch_k, double t_final) {
   return s;
 }
 
-BenchScene rope_scene(int nodes, double stretch_k, double t_final) {
+BenchScene rope_scene(int nodes, double stretch_k, double t_final, double length, double total_mass) {
   RopeSpec spec;
   spec.nodes = nodes;
-  spec.length = 1.0;
-  spec.total_mass = 0.1;
+  spec.length = length;
+  spec.total_mass = total_mass;
   spec.stretch = SpringParameters{stretch_k, 0.1};
   spec.bend = SpringParameters{1.0, 0.01};
   BenchScene s;

@@ -134,6 +134,10 @@ class IntegratorBase {
   bool mass_matrix_valid_ = false;
   std::unique_ptr<LinearSolver> mass_solver_;  // for M^-1 F when M is not diagonal
   bool mass_solver_factored_ = false;
+  // Fixed-step explicit methods on passive scenes with an energy: the energy
+  // at initialize(), to stop a slow blow-up (integrator_base.cc).
+  bool watch_energy_ = false;
+  double initial_energy_ = 0.0;
   double ideal_next_step_ = std::numeric_limits<double>::quiet_NaN();
   bool at_minimum_ = false;
   // Dense output workspace.

@@ -24,10 +24,12 @@ struct BenchScene {
   int dofs() const { return scene->dimensions().nv; }
 };
 
-// nx x nx cloth, MODELS.md parameters of models/cloth.yaml, stretch k given.
-BenchScene cloth_scene(int nx, double stretch_k, double t_final);
+// nx x nx cloth with the springs of models/cloth.yaml and the given stretch
+// k, `size` metres square and `total_mass` kg.
+BenchScene cloth_scene(int nx, double stretch_k, double t_final, double size = 1.0, double total_mass = 0.4);
 // A particle rope of `nodes` nodes, stretch k, pinned at node 0.
-BenchScene rope_scene(int nodes, double stretch_k, double t_final);
+BenchScene rope_scene(int nodes, double stretch_k, double t_final, double length = 1.0,
+                      double total_mass = 0.1);
 // The chain in reduced coordinates, every joint at `angle`, optional spring.
 BenchScene chain_scene(int links, double angle, double joint_stiffness, double t_final);
 // The chain as free bodies and bushings (k_lin, k_ang as given, damped at
