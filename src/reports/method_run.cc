@@ -58,6 +58,7 @@ MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const Be
     return run;
   }
   const State initial = system.initial_state();
+  SparseMatrix mass = system.mass_matrix_pattern();
   const bool energy = options.track_energy && system.capabilities().has_energy;
   if (energy) run.energy_start = run.energy_max = run.energy_end = system.energy(initial);
   const auto start = std::chrono::steady_clock::now();
@@ -87,6 +88,10 @@ MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const Be
         const double e = system.energy(copy);
         run.energy_max = std::max(run.energy_max, e);
         run.energy_end = e;
+        const Dimensions d = system.dimensions();
+        system.mass_matrix(s.q(d), &mass);
+        const Eigen::VectorXd v = s.v(d);
+        run.kinetic_max = std::max(run.kinetic_max, 0.5 * v.dot(mass * v));
       }
       Eigen::VectorXd x;
       while (next < times.size() && times[next] <= s.t * (1.0 + 1e-12) + 1e-15) {

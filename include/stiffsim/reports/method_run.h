@@ -35,6 +35,7 @@ struct MethodRun {
   bool over_budget = false;    // stopped by the wall-time budget
   std::string message;         // failure or budget message
   double energy_start = 0.0, energy_max = 0.0, energy_end = 0.0;  // when tracked
+  double kinetic_max = 0.0;  // largest kinetic energy 1/2 v^T M v seen, when tracked
   bool non_finite = false;
   double resident_mb = 0.0;  // process resident memory at the end of the run, integrator alive
   // After the first step (symbolic analysis, first Jacobian and
