@@ -443,11 +443,11 @@ int main(int argc, char** argv) {
   using namespace stiffsim;
   CLI::App app{
       "stiffsim: sparse multibody simulation with the velocity-implicit Euler integrator.\n"
-      "Cloth, rope and triangle-mesh mass-spring scenes are described in YAML files "
-      "(models/*.yaml)."};
+      "Scenes are YAML files (models/*.yaml) of cloth, rope and triangle-mesh mass-spring "
+      "components and URDF articulated bodies, or a bare URDF file."};
   app.set_version_flag("--version", "stiffsim 0.1.0");
   app.require_subcommand(1);
-  app.footer("Run 'stiffsim run --help' for the options of a run.");
+  app.footer("Run 'stiffsim run --help' for the options of a run, 'stiffsim bench --help' for the reports.");
   RunOptions options;
   CLI::App* run = app.add_subcommand(
       "run", "Simulate a scene and write its trajectory (CSV), statistics (JSON) and frames (VTK)");
