@@ -11,6 +11,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (stiffsim_fuzz::names_special_file(data, size)) return -1;  // not added to the corpus
+  if (stiffsim_fuzz::asks_for_a_large_scene(data, size)) return -1;
   const std::string path = stiffsim_fuzz::write_input("scene.yaml", data, size);
   try {
     stiffsim::SceneConfig config = stiffsim::load_scene(path);
