@@ -83,8 +83,8 @@ struct RunOptions {
 
 void add_run_options(CLI::App* run, RunOptions* o) {
   run->add_option("SCENE", o->scene,
-                  "Scene file: YAML with cloth, rope and mesh components (DESIGN.md section 9). "
-                  "Bare URDF files are not supported yet.")
+                  "Scene file: YAML with cloth, rope, mesh and URDF components (DESIGN.md section 9), "
+                  "or a bare .urdf file (one exact articulated body named after the file)")
       ->required();
   run->add_option("--set", o->sets,
                   "Override a scene value, PATH=VALUE with VALUE in YAML (repeatable): "

@@ -193,6 +193,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // Trials 1-3 are the reuse ladder; trial 4 iterates with a fresh Jacobian
   // at every iterate before the step is given up.
   static constexpr int kFullNewtonTrial = 4;
+  // A factorization formed for a step more than this factor away from the
+  // current one is refactored before its first use (refresh_matrices).
+  static constexpr double kReuseStepRatio = 4.0;
   // Halvings of a Newton step before the iteration counts as diverged.
   static constexpr int kMaxBacktracks = 8;
 
