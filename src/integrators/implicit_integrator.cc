@@ -297,23 +297,26 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // step equations. Otherwise the residual norm is the merit. The full
     // step is taken whenever it qualifies; the trial residual is then the
     // next iteration's, at no extra cost.
+    // An update at the level of round-off cannot decrease any merit
+    // measurably; it is taken, and the convergence test calls it zero. Nor
+    // can an update below the Newton tolerance lead the iteration astray;
+    // near round-off its merit is noise, and a search would fail a
+    // converged iterate. Such updates are taken without a search.
+    auto at_round_off = [&] {
+      for (int k = 0; k < n; ++k) {
+        if (std::abs(dy_[k]) > std::max(std::abs((*x)[offset + k]), 1.0) * kZeroUpdate) return false;
+      }
+      return true;
+    };
+    const bool take_as_is = dy_.lpNorm<Eigen::Infinity>() <= newton_tolerance() || at_round_off();
     const bool use_potential = potential_search(trial);
     double g_current = 0.0, slope = 0.0;
     if (use_potential) {
-      g_current = potential(tf, x0, *x, h, true);
+      // G itself is only needed by a search.
+      if (!take_as_is) g_current = potential(tf, x0, *x, h, true);
       slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G
     }
     const bool descend_potential = use_potential && slope < 0.0;
-    // An update at the level of round-off cannot decrease any merit
-    // measurably; it is taken, and the convergence test calls it zero.
-    bool negligible = true;
-    for (int k = 0; k < n && negligible; ++k) {
-      negligible = std::abs(dy_[k]) <= std::max(std::abs((*x)[offset + k]), 1.0) * kZeroUpdate;
-    }
-    // Nor can an update below the Newton tolerance lead the iteration
-    // astray; near round-off its merit is noise, and a search would fail
-    // a converged iterate.
-    negligible = negligible || dy_.lpNorm<Eigen::Infinity>() <= newton_tolerance();
     double alpha = 1.0;
     for (int backtrack = 0;; ++backtrack) {
       x_trial_ = *x;
@@ -322,7 +325,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       residual(tf, h, x0, x_trial_, &r_trial_);
       const double trial_merit = merit(r_trial_);
       bool accept = std::isfinite(trial_merit);
-      if (negligible) {
+      if (take_as_is) {
         // accept as is
       } else if (accept && descend_potential) {
         const double g_trial = potential(tf, x0, x_trial_, h, false);

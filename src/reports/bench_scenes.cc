@@ -46,6 +46,14 @@ BenchScene rope_scene(int nodes, double stretch_k, double t_final, double length
   return s;
 }
 
+BenchScene cloth_scene_at_shipped_spacing(int nx, double stretch_k, double t_final) {
+  return cloth_scene(nx, stretch_k, t_final, (nx - 1) / 31.0, 0.4 * nx * nx / 1024.0);
+}
+
+BenchScene rope_scene_at_shipped_spacing(int nodes, double stretch_k, double t_final) {
+  return rope_scene(nodes, stretch_k, t_final, (nodes - 1) / 49.0, 0.1 * nodes / 50.0);
+}
+
 BenchScene chain_scene(int links, double angle, double joint_stiffness, double t_final) {
   ArticulatedOptions o;
   o.initial_q = Eigen::VectorXd::Constant(links, angle);

@@ -44,13 +44,10 @@ int run_scaling_report(const ReportOptions& options) {
   const int steps = quick ? 5 : 10;
   std::vector<Family> families;
   families.push_back({"particle rope", quick ? std::vector<int>{34, 334, 3334} : std::vector<int>{34, 334, 3334, 33334},
-                      // The node spacing and mass of models/rope.yaml at every size, so
-                      // that a node's dynamics (and Newton's work) do not change with n.
-                      [](int n) { return rope_scene(n, 1e5, 1.0, (n - 1) / 49.0, 0.1 * n / 50.0); }, 1e-3,
+                      [](int n) { return rope_scene_at_shipped_spacing(n, 1e5, 1.0); }, 1e-3,
                       quick ? 10000 : 100000});
   families.push_back({"cloth", quick ? std::vector<int>{6, 18, 58} : std::vector<int>{6, 18, 58, 100, 183},
-                      // Likewise the spacing and node mass of the 32x32 models/cloth.yaml.
-                      [](int n) { return cloth_scene(n, 1e3, 1.0, (n - 1) / 31.0, 0.4 * n * n / 1024.0); },
+                      [](int n) { return cloth_scene_at_shipped_spacing(n, 1e3, 1.0); },
                       1.0 / 60.0, quick ? 10000 : 31000});
   families.push_back({"compliant chain",
                       quick ? std::vector<int>{17, 167, 1667} : std::vector<int>{17, 167, 1667, 16667},
@@ -157,7 +154,7 @@ int run_scaling_report(const ReportOptions& options) {
      << "accuracies 1e-2, 1e-3, 1e-4 (VIE) and 1e-2, 1e-3 (IE).\n\n"
      << "| cloth | DOFs | target error | VIE s | IE s | IE / VIE |\n|---|---|---|---|---|---|\n";
   for (int n : quick ? std::vector<int>{18, 32} : std::vector<int>{32, 58, 100}) {
-    BenchScene s = cloth_scene(n, 1e3, 0.1, (n - 1) / 31.0, 0.4 * n * n / 1024.0);
+    BenchScene s = cloth_scene_at_shipped_spacing(n, 1e3, 0.1);
     s.sample_period = 0.05;
     BenchRunOptions o;
     o.wall_budget_seconds = quick ? 60.0 : 1800.0;

@@ -129,6 +129,9 @@ class IntegratorBase {
   // Throws IntegrationError "<method>: <why> at t = .. s with step h = .. s
   // <detail>; largest state entries of the last attempt: ...".
   [[noreturn]] void fail_step(double h, const std::string& why, const std::string& detail) const;
+  // Fixed explicit steps of a passive scene: throws when the candidate at t
+  // has gained energy that no stable step could (watch_energy_).
+  void check_energy_blow_up(double t, double h);
 
   SparseMatrix mass_matrix_;
   bool mass_matrix_valid_ = false;
@@ -138,6 +141,7 @@ class IntegratorBase {
   // at initialize(), to stop a slow blow-up (integrator_base.cc).
   bool watch_energy_ = false;
   double initial_energy_ = 0.0;
+  State energy_workspace_;
   double ideal_next_step_ = std::numeric_limits<double>::quiet_NaN();
   bool at_minimum_ = false;
   // Dense output workspace.

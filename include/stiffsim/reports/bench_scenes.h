@@ -30,6 +30,12 @@ BenchScene cloth_scene(int nx, double stretch_k, double t_final, double size = 1
 // A particle rope of `nodes` nodes, stretch k, pinned at node 0.
 BenchScene rope_scene(int nodes, double stretch_k, double t_final, double length = 1.0,
                       double total_mass = 0.1);
+// The same at the node spacing and node mass of the shipped scenes
+// (models/cloth.yaml: 32 x 32 nodes on 1 m, 0.4 kg; models/rope.yaml: 50
+// nodes on 1 m, 0.1 kg) whatever the size: a larger sheet, a longer rope,
+// whose nodes' dynamics do not change with n.
+BenchScene cloth_scene_at_shipped_spacing(int nx, double stretch_k, double t_final);
+BenchScene rope_scene_at_shipped_spacing(int nodes, double stretch_k, double t_final);
 // The chain in reduced coordinates, every joint at `angle`, optional spring.
 BenchScene chain_scene(int links, double angle, double joint_stiffness, double t_final);
 // The chain as free bodies and bushings (k_lin, k_ang as given, damped at
