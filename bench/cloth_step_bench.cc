@@ -8,7 +8,6 @@
 #include <benchmark/benchmark.h>
 
 #include "stiffsim/integrators/velocity_implicit_euler.h"
-#include "stiffsim/linalg/blas_threads.h"
 #include "stiffsim/linalg/linear_solver.h"
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
@@ -99,9 +98,9 @@ BENCHMARK(BM_VieStep)->Args({100, 0})->Iterations(12)->Unit(benchmark::kMillisec
 }  // namespace stiffsim
 
 int main(int argc, char** argv) {
-  // As the CLI does by default: OpenBLAS's spinning workers cost more than
-  // they gain on these factorizations (see linalg/blas_threads.h).
-  stiffsim::set_blas_threads(1);
+  // No set_blas_threads call: the first sparse solver applies the default of
+  // one thread (OpenBLAS and CHOLMOD's OpenMP regions), as in every entry
+  // point; see linalg/blas_threads.h.
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();

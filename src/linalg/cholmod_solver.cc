@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "stiffsim/linalg/blas_threads.h"
+
 namespace stiffsim {
 namespace {
 
@@ -40,6 +42,7 @@ std::string format_ratio(double value) {
 }  // namespace
 
 CholmodSolver::CholmodSolver() {
+  apply_blas_threads();
   cholmod_start(&common_);
   // Failures become exceptions or return values carrying the status; CHOLMOD's
   // own messages would go to stdout, which the CLI may use for results.
@@ -120,6 +123,7 @@ void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
 
 bool CholmodSolver::factorize(const SparseMatrix& A) {
   if (n_ < 0) throw std::logic_error("CholmodSolver::factorize called before analyze");
+  apply_blas_threads();  // this thread may not be the constructor's
   if (A.rows() != n_ || A.cols() != n_ || !A.isCompressed() ||
       A.nonZeros() != static_cast<Eigen::Index>(inner_.size()) ||
       !std::equal(outer_.begin(), outer_.end(), A.outerIndexPtr()) ||

@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "stiffsim/linalg/blas_threads.h"
+
 namespace stiffsim {
 namespace {
 
@@ -24,6 +26,7 @@ std::string umfpack_error(const char* call, int status) {
 }  // namespace
 
 UmfpackSolver::UmfpackSolver() {
+  apply_blas_threads();
   umfpack_di_defaults(control_);
   // No iterative refinement: every solve here serves a Newton iteration
   // whose matrix is an approximation anyway, and each refinement step costs
@@ -80,6 +83,7 @@ void UmfpackSolver::analyze(const SparseMatrix& pattern) {
 
 bool UmfpackSolver::factorize(const SparseMatrix& A) {
   if (n_ < 0) throw std::logic_error("UmfpackSolver::factorize called before analyze");
+  apply_blas_threads();  // this thread may not be the constructor's
   const auto nnz = matrix_.nonZeros();
   if (A.rows() != n_ || A.cols() != n_ || A.nonZeros() != nnz || !A.isCompressed() ||
       !std::equal(A.outerIndexPtr(), A.outerIndexPtr() + n_ + 1, matrix_.outerIndexPtr()) ||
