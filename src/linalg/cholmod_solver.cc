@@ -47,7 +47,6 @@ CholmodSolver::CholmodSolver() {
   // Failures become exceptions or return values carrying the status; CHOLMOD's
   // own messages would go to stdout, which the CLI may use for results.
   common_.print = 0;
-  common_.supernodal = CHOLMOD_SUPERNODAL;
   common_.final_ll = true;
 }
 
@@ -108,17 +107,28 @@ void CholmodSolver::analyze(const SparseMatrix& pattern) {
 
 void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
   free_factor_and_workspace();
-  if (mode_ == Mode::kLDLT) {
-    common_.supernodal = CHOLMOD_SIMPLICIAL;
-    common_.final_ll = false;
-  } else {
-    common_.supernodal = CHOLMOD_SUPERNODAL;
-    common_.final_ll = true;
-  }
+  // LL^T: CHOLMOD_AUTO lets cholmod_analyze pick simplicial when the ordered
+  // pattern's flops per factor entry are below supernodal_switch (40): a banded
+  // rope gives supernodes too thin for dense kernels to pay for their explicit
+  // zeros and bookkeeping, a 2-D grid gives wide fronts that BLAS runs well.
+  // LDL^T exists only in simplicial form.
+  const bool ldlt = mode_ == Mode::kLDLT;
+  common_.supernodal = ldlt ? CHOLMOD_SIMPLICIAL : CHOLMOD_AUTO;
+  common_.final_ll = !ldlt;
   cholmod_sparse header = wrap(pattern);
   factor_ = cholmod_analyze(&header, &common_);
   if (factor_ == nullptr)
     throw std::runtime_error(cholmod_error("cholmod_analyze", common_.status));
+  if (ldlt) return;  // the LL^T choice and its note stay as they were
+  llt_supernodal_ = factor_->is_super != 0;
+  // fl and lnz are those of the ordering cholmod_analyze kept.
+  const double flops_per_entry = common_.lnz > 0 ? common_.fl / common_.lnz : 0.0;
+  const double fill = common_.anz > 0 ? common_.lnz / common_.anz : 0.0;
+  factorization_note_ = method() + ": flops/nnz(L) = " + format_ratio(flops_per_entry) +
+                        (llt_supernodal_ ? " >= " : " < ") +
+                        format_ratio(common_.supernodal_switch) +
+                        ", nnz(L) = " + std::to_string(static_cast<long>(common_.lnz)) + " (" +
+                        format_ratio(fill) + "x tril(A))";
 }
 
 bool CholmodSolver::factorize(const SparseMatrix& A) {
@@ -160,7 +170,7 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   const std::string pivot_position =
       "pivot " + std::to_string(factor_->minor + 1) + " of " + std::to_string(n_);
 
-  if (mode_ == Mode::kSupernodalLLT) {
+  if (mode_ == Mode::kLLT) {
     if (!pivot_failed) return pivot_ratio_acceptable(cholmod_rcond(factor_, &common_), n_);
     switch_mode(Mode::kLDLT,
                 "matrix not positive definite (" + pivot_position + ")" + at_factorization);
@@ -190,10 +200,10 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
 }
 
 void CholmodSolver::switch_mode(Mode next, const std::string& why) {
-  auto describe = [](Mode mode) {
+  auto describe = [this](Mode mode) {
     switch (mode) {
-      case Mode::kSupernodalLLT:
-        return "CHOLMOD supernodal LL^T";
+      case Mode::kLLT:
+        return llt_supernodal_ ? "CHOLMOD supernodal LL^T" : "CHOLMOD simplicial LL^T";
       case Mode::kLDLT:
         return "CHOLMOD LDL^T";
       case Mode::kUmfpack:
@@ -229,6 +239,13 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
     rhs.z = nullptr;
     rhs.xtype = CHOLMOD_REAL;
     rhs.dtype = CHOLMOD_DOUBLE;
+    // A simplicial solve asks for a 4 x n Y (up to 4 right-hand sides at a
+    // time) but leaves it shaped 1 x n, the columns it used, so the next call
+    // would free and reallocate it; its storage still holds 4 x n.
+    if (!factor_->is_super && solve_workspace_y_ != nullptr &&
+        solve_workspace_y_->nzmax >= 4 * solve_workspace_y_->ncol) {
+      solve_workspace_y_->nrow = solve_workspace_y_->d = 4;
+    }
     if (!cholmod_solve2(CHOLMOD_A, factor_, &rhs, nullptr, &solution_, nullptr, &solve_workspace_y_,
                         &solve_workspace_e_, &common_)) {
       throw std::runtime_error(cholmod_error("cholmod_solve2", common_.status));
@@ -243,8 +260,9 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
 
 std::string CholmodSolver::method() const {
   switch (mode_) {
-    case Mode::kSupernodalLLT:
-      return "cholmod-supernodal-llt";
+    case Mode::kLLT:
+      if (n_ < 0) return "cholmod-llt";  // simplicial or supernodal: analyze() decides
+      return llt_supernodal_ ? "cholmod-supernodal-llt" : "cholmod-simplicial-llt";
     case Mode::kLDLT:
       return "cholmod-ldlt";
     case Mode::kUmfpack:

@@ -45,7 +45,7 @@ std::string describe(LinearSolverKind kind) {
     case LinearSolverKind::kDenseLDLT:
       return "dense LDLT";
     case LinearSolverKind::kCholmod:
-      return "CHOLMOD supernodal LL^T";
+      return "CHOLMOD LL^T";  // simplicial or supernodal: see factorization_note()
     case LinearSolverKind::kUmfpack:
       return "UMFPACK";
     case LinearSolverKind::kAuto:

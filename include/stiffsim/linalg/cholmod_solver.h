@@ -3,8 +3,14 @@
 // are expected to be positive definite. The matrix is read through its lower
 // triangle only (stype = -1), wrapped without copying.
 //
+// LL^T is simplicial or supernodal by the pattern: analyze() keeps CHOLMOD's
+// own rule (simplicial when the flops per entry of L, after ordering, are
+// below Common->supernodal_switch = 40), says which in method() and why in
+// factorization_note(). Banded patterns (ropes, chains) go simplicial; 2-D
+// grids (cloth) of more than a few hundred nodes go supernodal.
+//
 // Fallbacks, each taken at most once and then kept for the solver's life:
-// supernodal LL^T -> simplicial LDL^T when CHOLMOD reports the matrix not
+// LL^T -> simplicial LDL^T when CHOLMOD reports the matrix not
 // positive definite (LDL^T without pivoting still handles most mildly
 // indefinite matrices), then LDL^T -> UMFPACK when LDL^T meets a zero or tiny
 // pivot (UMFPACK pivots for stability). Each switch is printed once to stderr
@@ -40,12 +46,13 @@ class CholmodSolver final : public LinearSolver {
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
   std::string method() const override;
   // Supernodal: L->xsize, the entries stored in the supernodes (including the
-  // explicit zeros that make supernodes dense). Simplicial LDL^T: the sum of
-  // the column counts L->nz, with D on the diagonal of L. UMFPACK: its count.
+  // explicit zeros that make supernodes dense). Simplicial LL^T and LDL^T: the
+  // sum of the column counts L->nz (D on the diagonal of L). UMFPACK: its count.
   long factor_nonzeros() const override;
 
  private:
-  enum class Mode { kSupernodalLLT, kLDLT, kUmfpack };
+  // kLLT is simplicial or supernodal as the last LL^T analysis chose.
+  enum class Mode { kLLT, kLDLT, kUmfpack };
 
   cholmod_sparse wrap(const SparseMatrix& A) const;
   void analyze_with_cholmod(const SparseMatrix& pattern);
@@ -62,8 +69,9 @@ class CholmodSolver final : public LinearSolver {
   cholmod_dense* solve_workspace_y_ = nullptr;
   cholmod_dense* solve_workspace_e_ = nullptr;
   std::unique_ptr<UmfpackSolver> umfpack_;  // only after the last fallback
-  Mode mode_ = Mode::kSupernodalLLT;
-  int n_ = -1;  // -1 until analyze()
+  Mode mode_ = Mode::kLLT;
+  bool llt_supernodal_ = false;  // set by each LL^T analysis
+  int n_ = -1;                   // -1 until analyze()
   // The analyzed pattern, to reject a matrix with another one: CHOLMOD would
   // silently factor garbage.
   std::vector<int> outer_, inner_;

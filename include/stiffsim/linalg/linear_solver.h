@@ -51,19 +51,25 @@ class LinearSolver {
   // without a successful factorize().
   virtual void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) = 0;
 
-  // What is in use now ("cholmod-supernodal-llt", "cholmod-ldlt", "umfpack",
-  // "dense-lu", ...); a fallback changes it.
+  // What is in use now ("cholmod-supernodal-llt", "cholmod-simplicial-llt",
+  // "cholmod-ldlt", "umfpack", "dense-lu", ...); a fallback changes it, and a
+  // solver that picks its variant by the pattern says so only after analyze().
   virtual std::string method() const = 0;
   // Nonzeros of the factor(s) after the last factorization.
   virtual long factor_nonzeros() const = 0;
   // Set once when the solver fell back to another method (e.g. the matrix was
   // not positive definite), empty otherwise.
   const std::string& fallback_note() const { return fallback_note_; }
+  // Set by analyze() when the solver picks its variant by the pattern (CHOLMOD:
+  // simplicial or supernodal LL^T), with the figures that decided; empty
+  // otherwise. For the stats, next to LinearSolverChoice::reason.
+  const std::string& factorization_note() const { return factorization_note_; }
   const LinearSolverCounters& counters() const { return counters_; }
 
  protected:
   LinearSolverCounters counters_;
   std::string fallback_note_;
+  std::string factorization_note_;
 };
 
 struct LinearSolverChoice {
