@@ -67,7 +67,7 @@ struct RunOptions {
   std::string integrator;
   double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
   bool fixed_step = false, error_estimate = false;
-  std::string jacobian, linear_solver, newton_form, error_estimator;
+  std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve;
   bool full_newton = false, no_reuse = false;
   std::string output, stats, vtk;
   std::vector<std::string> sets;
@@ -78,13 +78,15 @@ struct RunOptions {
               *accuracy_option = nullptr, *sample_period_option = nullptr,
               *fixed_step_option = nullptr, *error_estimate_option = nullptr,
               *jacobian_option = nullptr, *linear_solver_option = nullptr,
-              *newton_form_option = nullptr, *error_estimator_option = nullptr;
+              *newton_form_option = nullptr, *error_estimator_option = nullptr,
+              *newton_solve_option = nullptr;
 };
 
 void add_run_options(CLI::App* run, RunOptions* o) {
-  run->add_option("SCENE", o->scene,
-                  "Scene file: YAML with cloth, rope, mesh and URDF components (DESIGN.md section 9), "
-                  "or a bare .urdf file (one exact articulated body named after the file)")
+  run->add_option(
+         "SCENE", o->scene,
+         "Scene file: YAML with cloth, rope, mesh and URDF components (DESIGN.md section 9), "
+         "or a bare .urdf file (one exact articulated body named after the file)")
       ->required();
   run->add_option("--set", o->sets,
                   "Override a scene value, PATH=VALUE with VALUE in YAML (repeatable): "
@@ -157,6 +159,16 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "propagated, as vie does)")
           ->check(CLI::IsMember(error_estimator_names()))
           ->group(newton);
+  o->newton_solve_option =
+      run->add_option("--newton-solve", o->newton_solve,
+                      "How Newton iterations solve: auto (default: krylov where the iteration "
+                      "matrix is symmetric positive definite and sparse, chord otherwise), "
+                      "krylov (CG on the current matrix, preconditioned by the last "
+                      "factorization, refactored by measured cost), chord (the last "
+                      "factorization as the Newton matrix, the reuse ladder) or fresh (a new "
+                      "Jacobian and factorization every iteration)")
+          ->check(CLI::IsMember(newton_solve_names()))
+          ->group(newton);
   run->add_flag("--full-newton", o->full_newton,
                 "Fresh Jacobian and factorization at every Newton iteration")
       ->group(newton);
@@ -215,6 +227,9 @@ void apply_options(const RunOptions& o, SceneConfig* config) {
   }
   if (o.error_estimator_option->count() > 0) {
     config->implicit.error_estimator = parse_error_estimator(o.error_estimator);
+  }
+  if (o.newton_solve_option->count() > 0) {
+    config->implicit.newton_solve = parse_newton_solve(o.newton_solve);
   }
   if (o.full_newton) config->implicit.full_newton = true;
   if (o.no_reuse) config->implicit.reuse = false;
@@ -447,7 +462,9 @@ int main(int argc, char** argv) {
       "components and URDF articulated bodies, or a bare URDF file."};
   app.set_version_flag("--version", "stiffsim 0.1.0");
   app.require_subcommand(1);
-  app.footer("Run 'stiffsim run --help' for the options of a run, 'stiffsim bench --help' for the reports.");
+  app.footer(
+      "Run 'stiffsim run --help' for the options of a run, 'stiffsim bench --help' for the "
+      "reports.");
   RunOptions options;
   CLI::App* run = app.add_subcommand(
       "run", "Simulate a scene and write its trajectory (CSV), statistics (JSON) and frames (VTK)");
@@ -455,18 +472,21 @@ int main(int argc, char** argv) {
 
   ReportOptions bench_options;
   std::string report;
-  CLI::App* bench = app.add_subcommand(
-      "bench", "Run a report: work-precision, scaling or stability (CSV and Markdown; "
-               "bench/plot_reports.py draws the plots)");
+  CLI::App* bench =
+      app.add_subcommand("bench",
+                         "Run a report: work-precision, scaling or stability (CSV and Markdown; "
+                         "bench/plot_reports.py draws the plots)");
   bench->add_option("report", report, "precision | scaling | stability")
       ->required()
       ->check(CLI::IsMember({"precision", "scaling", "stability"}));
-  bench->add_flag("--quick", bench_options.quick, "The small preset (minutes on 2 cores; CI runs it)");
+  bench->add_flag("--quick", bench_options.quick,
+                  "The small preset (minutes on 2 cores; CI runs it)");
   bench->add_option("--out", bench_options.out_dir, "Directory for the CSV and Markdown files")
       ->capture_default_str();
   bench_options.models_dir = STIFFSIM_MODELS_DIR;
-  bench->add_option("--models", bench_options.models_dir,
-                    "Directory with chain_N.urdf (for MuJoCo, which loads the file)")
+  bench
+      ->add_option("--models", bench_options.models_dir,
+                   "Directory with chain_N.urdf (for MuJoCo, which loads the file)")
       ->capture_default_str();
 
   try {
@@ -475,7 +495,10 @@ int main(int argc, char** argv) {
     return app.exit(e);  // --help, --version
   } catch (const CLI::ParseError& e) {
     std::fprintf(stderr, "stiffsim: error: %s\nRun 'stiffsim %s--help' for the options.\n",
-                 e.what(), run->parsed() ? "run " : bench->parsed() ? "bench " : "");
+                 e.what(),
+                 run->parsed()     ? "run "
+                 : bench->parsed() ? "bench "
+                                   : "");
     return kUsageExitCode;
   }
 

@@ -89,7 +89,7 @@ void ImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double 
   }
 }
 
-bool ImplicitEuler::form_and_factor(double h) {
+const SparseMatrix& ImplicitEuler::form_iteration_matrix(double h, bool* symmetric) {
   const auto start = WallClock::now();
   const Dimensions& d = dims_;
   const ForceJacobians& J = jacobians_;
@@ -132,7 +132,8 @@ bool ImplicitEuler::form_and_factor(double h) {
   stats_.assembly_seconds += seconds_since(start);
   // The q rows (I, -a N) against the v rows (-a K, M - a D) make A
   // unsymmetric whatever K and D are.
-  return factor_iteration_matrix(A, false, h);
+  *symmetric = false;
+  return A;
 }
 
 void ImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {
@@ -183,8 +184,8 @@ double ImplicitEuler::merit(const Eigen::VectorXd& r) const {
   // approximate Newton direction stops being a descent direction.
   const Dimensions& d = dims_;
   if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
-    double sum = r.segment(0, d.nq).squaredNorm() / (merit_step_ * merit_step_) +
-                 r.tail(d.nz).squaredNorm();
+    double sum =
+        r.segment(0, d.nq).squaredNorm() / (merit_step_ * merit_step_) + r.tail(d.nz).squaredNorm();
     for (int i = 0; i < d.nv; ++i) {
       const double w = r[d.nq + i] / mass_diagonal_[i];
       sum += w * w;
@@ -193,6 +194,19 @@ double ImplicitEuler::merit(const Eigen::VectorXd& r) const {
   }
   return r.segment(0, d.nq).squaredNorm() / (merit_step_ * merit_step_) +
          r.tail(d.nv + d.nz).squaredNorm();
+}
+
+const Eigen::VectorXd& ImplicitEuler::residual_scaling() {
+  // The row weights of merit(), so Krylov solves minimize its norm.
+  const Dimensions& d = dims_;
+  residual_scale_.resize(d.nx());
+  residual_scale_.head(d.nq).setConstant(1.0 / merit_step_);
+  const bool by_mass =
+      implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix;
+  for (int i = 0; i < d.nv; ++i)
+    residual_scale_[d.nq + i] = by_mass ? 1.0 / mass_diagonal_[i] : 1.0;
+  residual_scale_.tail(d.nz).setOnes();
+  return residual_scale_;
 }
 
 bool ImplicitEuler::step_with_trapezoid_estimate(double h) {
@@ -232,7 +246,8 @@ bool ImplicitEuler::do_step(double h) {
 
 IntegratorReport ImplicitEuler::report() const {
   IntegratorReport r = ImplicitIntegrator::report();
-  if (estimating_error()) r.error_estimator = uses_doubling() ? "step doubling" : "implicit trapezoid";
+  if (estimating_error())
+    r.error_estimator = uses_doubling() ? "step doubling" : "implicit trapezoid";
   return r;
 }
 

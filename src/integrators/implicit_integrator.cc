@@ -1,5 +1,6 @@
 #include "stiffsim/integrators/implicit_integrator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -41,6 +42,28 @@ std::string to_string(NewtonForm form) {
   return form == NewtonForm::kMassMatrix ? "mass-matrix" : "generic";
 }
 
+NewtonSolve parse_newton_solve(const std::string& name) {
+  if (name == "auto") return NewtonSolve::kAuto;
+  if (name == "chord") return NewtonSolve::kChord;
+  if (name == "krylov") return NewtonSolve::kKrylov;
+  if (name == "fresh") return NewtonSolve::kFresh;
+  throw InputError("unknown Newton solve '" + name + "' (expected auto, chord, krylov or fresh)");
+}
+
+std::string to_string(NewtonSolve solve) {
+  switch (solve) {
+    case NewtonSolve::kAuto:
+      return "auto";
+    case NewtonSolve::kChord:
+      return "chord";
+    case NewtonSolve::kKrylov:
+      return "krylov";
+    case NewtonSolve::kFresh:
+      return "fresh";
+  }
+  return "?";
+}
+
 ImplicitErrorEstimate parse_error_estimator(const std::string& name) {
   if (name == "trapezoid") return ImplicitErrorEstimate::kTrapezoid;
   if (name == "doubling") return ImplicitErrorEstimate::kStepDoubling;
@@ -62,6 +85,13 @@ ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings 
   if (!(implicit_.newton_kappa > 0.0 && implicit_.newton_kappa < 1.0)) {
     throw InputError("newton_kappa must be in (0, 1)");
   }
+  if (implicit_.max_krylov_iterations < 1) {
+    throw InputError("max_krylov_iterations must be at least 1");
+  }
+  if (!(implicit_.max_forcing > 0.0 && implicit_.max_forcing < 1.0)) {
+    throw InputError("max_forcing must be in (0, 1)");
+  }
+  if (implicit_.newton_solve == NewtonSolve::kFresh) implicit_.full_newton = true;
   jacobians_ = system.jacobian_pattern();
 }
 
@@ -108,7 +138,8 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
 void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd& x) {
   const auto start = WallClock::now();
   JacobianRequest request;
-  request.definite = implicit_.definite_iteration_matrix;
+  request.definite = implicit_.definite_iteration_matrix && !exact_jacobian_;
+  request.complete = exact_jacobian_;
   if (!caps_.constant_mass_matrix && dims_.nv > 0 && iterate_acceleration_) {
     request.acceleration = inertial_acceleration_.data();
   } else if (!caps_.constant_mass_matrix && dims_.nv > 0) {
@@ -130,6 +161,7 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   stats_.jacobian_approximated_terms += jacobians_.approximated_terms;
   stats_.jacobian_seconds += seconds_since(start);
   jacobians_valid_ = true;
+  last_jacobian_exact_ = exact_jacobian_;
 }
 
 void ImplicitIntegrator::compute_force_jacobians_ahead(double t, const Eigen::VectorXd& x,
@@ -160,10 +192,66 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   }
   const auto start = WallClock::now();
   m.factored = m.solver.solver->factorize(matrix);
-  stats_.factorization_seconds += seconds_since(start);
+  last_factorization_seconds_ = seconds_since(start);
+  stats_.factorization_seconds += last_factorization_seconds_;
   ++stats_.iteration_matrix_factorizations;
+  switch (factor_reason_) {
+    case FactorReason::kFirst:
+      ++stats_.factorizations_first;
+      break;
+    case FactorReason::kCostModel:
+      ++stats_.factorizations_cost_model;
+      break;
+    case FactorReason::kKrylovFailed:
+      ++stats_.factorizations_krylov_failed;
+      break;
+    case FactorReason::kLadder:
+      ++stats_.factorizations_ladder;
+      break;
+  }
+  factor_reason_ = FactorReason::kLadder;
+  krylov_excess_seconds_ = 0.0;
+  refactor_due_ = refactor_failed_ = false;
   if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
+  if (!newton_solve_chosen_) choose_newton_solve(symmetric);
   return m.factored;
+}
+
+bool ImplicitIntegrator::form_and_factor(double h) {
+  bool symmetric = false;
+  const SparseMatrix& matrix = form_iteration_matrix(h, &symmetric);
+  return factor_iteration_matrix(matrix, symmetric, h);
+}
+
+void ImplicitIntegrator::choose_newton_solve(bool symmetric) {
+  // GMRES needs only a factorization to precondition with, of any kind
+  // (LL^T, LDL^T, LU). Small systems, solved dense, keep the direct path:
+  // there a factorization costs about what a few Krylov products do.
+  (void)symmetric;
+  const std::string method = matrices_[active_].solver.solver->method();
+  const bool sparse = method.rfind("dense", 0) != 0;
+  const NewtonSolve asked = implicit_.newton_solve;
+  newton_solve_chosen_ = true;
+  krylov_ = false;
+  if (implicit_.full_newton || asked == NewtonSolve::kFresh) {
+    newton_solve_reason_ = "asked for: a fresh Jacobian and factorization every iteration";
+  } else if (asked == NewtonSolve::kChord) {
+    newton_solve_reason_ = "asked for";
+  } else if (!reuse_enabled()) {
+    newton_solve_reason_ = "no reuse asked for: fresh matrices every step attempt";
+  } else if (!sparse) {
+    newton_solve_reason_ = "the iteration matrix is solved by " + method +
+                           " (small or dense: a direct solve is cheapest)";
+  } else {
+    krylov_ = true;
+    newton_solve_reason_ =
+        std::string(asked == NewtonSolve::kKrylov ? "asked for: " : "auto: ") +
+        "sparse iteration matrix (" + method + "); GMRES on the current matrix, the last " +
+        "factorization preconditions, refactored by measured cost" +
+        (asked == NewtonSolve::kKrylov
+             ? ""
+             : "; each step starts with the chord or Krylov, whichever cost less lately");
+  }
 }
 
 void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
@@ -175,6 +263,15 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
 
 void ImplicitIntegrator::initialize_newton(int unknowns) {
   const int nx = dims_.nx();
+  newton_solve_chosen_ = krylov_ = refactor_due_ = refactor_first_ = refactor_failed_ = false;
+  start_costs_[0] = start_costs_[1] = StartCost{};
+  solves_since_exploration_ = 0;
+  exploration_interval_ = kStartExploration;
+  last_best_ = kChordStart;
+  explored_ = last_jacobian_exact_ = false;
+  newton_solve_reason_.clear();
+  last_factorization_seconds_ = krylov_excess_seconds_ = 0.0;
+  residual_scale_.resize(0);
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_}) v->resize(nx);
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(unknowns);
   x_prev_.resize(nx);
@@ -186,8 +283,8 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   // potential). With a configuration-dependent M(q) (articulated bodies) the
   // step's velocity-product terms trade O(h^2) energy either way, so a gain
   // there is no sign of a spurious root.
-  guard_energy_ = implicit_.energy_guard && caps_.has_energy && caps_.passive &&
-                  caps_.constant_mass_matrix;
+  guard_energy_ =
+      implicit_.energy_guard && caps_.has_energy && caps_.passive && caps_.constant_mass_matrix;
   jacobians_valid_ = false;
   invalidate_factorization();
   for (auto& m : matrices_) m.h = 0.0;
@@ -195,8 +292,7 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   jacobian_step_t_ = jacobian_step_h_ = std::numeric_limits<double>::quiet_NaN();
 }
 
-void ImplicitIntegrator::compute_jacobian_and_factor(double t, const Eigen::VectorXd& x,
-                                                     double h) {
+void ImplicitIntegrator::compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h) {
   compute_jacobian(t, x, h);
   jacobian_step_t_ = t;
   jacobian_step_h_ = h;
@@ -216,8 +312,17 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
     compute_jacobian_and_factor(t, x, h);
     return Refresh::kProceed;
   }
+  // The chord's matrices are formed from a definite Jacobian; the Krylov
+  // path leaves an exact one behind, which they must not use.
+  auto refactor_from_last_jacobian = [&] {
+    if (last_jacobian_exact_) {
+      compute_jacobian_and_factor(t, x, h);
+    } else {
+      form_and_factor(h);
+    }
+  };
   if (!iteration_matrix_factored() && trial == 1) {
-    form_and_factor(h);
+    refactor_from_last_jacobian();
     return Refresh::kProceed;
   }
   switch (trial) {
@@ -230,12 +335,13 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
       // h = 1e-3 at h = 1.4e-5 left a velocity residual of 1e-3 m/s with the
       // Newton tolerance at 5e-5). Refactoring from the last Jacobian, as
       // Hairer's codes do whenever h changes, is the second rung anyway.
-      if (matrices_[active_].h > kReuseStepRatio * h || h > kReuseStepRatio * matrices_[active_].h) {
-        form_and_factor(h);
+      if (matrices_[active_].h > kReuseStepRatio * h ||
+          h > kReuseStepRatio * matrices_[active_].h) {
+        refactor_from_last_jacobian();
       }
       return Refresh::kProceed;
     case 2:  // refactor with the current h from the last Jacobian
-      if (matrices_[active_].h != h) {
+      if (matrices_[active_].h != h && !last_jacobian_exact_) {
         form_and_factor(h);
         return Refresh::kProceed;
       }
@@ -260,7 +366,16 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // starts where the linearization is degenerate (a flat membrane at rest has
   // no transverse stiffness) converges once the Jacobian follows the iterate.
   const bool full_newton = implicit_.full_newton || trial == kFullNewtonTrial;
-  if (!full_newton) {
+  // The Krylov path (trial 1 once chosen) builds its matrix at every
+  // iterate; it only needs a factorization to precondition with, and one
+  // formed for a step within kReuseStepRatio of h.
+  const bool krylov = trial == kKrylovTrial && !implicit_.full_newton;
+  if (krylov) {
+    const double h_f = matrices_[active_].h;
+    if (!iteration_matrix_factored() || h_f > kReuseStepRatio * h || h > kReuseStepRatio * h_f) {
+      refactor_first_ = true;
+    }
+  } else if (!full_newton) {
     if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
     if (!iteration_matrix_factored()) return false;
   }
@@ -271,15 +386,23 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   double last_norm = std::numeric_limits<double>::infinity();
   // The last rung converges (at least linearly with the definite clamp) but
   // may need more iterations than a fresh modified Newton; giving it three
-  // times the budget is cheaper than halving the step.
-  const int max_iterations = trial == kFullNewtonTrial ? 3 * implicit_.max_newton_iterations
-                                                       : implicit_.max_newton_iterations;
+  // times the budget is cheaper than halving the step. So does the Krylov
+  // path, whose iterations cost a few solves each.
+  const int max_iterations = trial == kFullNewtonTrial || krylov
+                                 ? 3 * implicit_.max_newton_iterations
+                                 : implicit_.max_newton_iterations;
+  // Eisenstat-Walker forcing (their choice 2, with Kelley's safeguards):
+  // the linear solve's relative tolerance follows the nonlinear residual's
+  // decrease, so early iterations solve loosely and the last ones well.
+  double forcing = implicit_.max_forcing;
+  double last_r_norm = 0.0;
   for (int i = 0; i < max_iterations; ++i) {
     if (full_newton) {
       // Linearize at the current iterate itself, with the step's own mean
       // acceleration (v - v_n) / h in the inertial term.
       if (!caps_.constant_mass_matrix && dims_.nv > 0) {
-        inertial_acceleration_ = (x->segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
+        inertial_acceleration_ =
+            (x->segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
         iterate_acceleration_ = true;
       }
       compute_jacobian(tf, *x, 0.0);
@@ -288,8 +411,29 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (!form_and_factor(h)) return false;
     }
     ++stats_.newton_raphson_iterations;
+    if (krylov) {
+      const double r_norm = std::sqrt(r_merit);
+      if (i > 0 && last_r_norm > 0.0) {
+        double ew = 0.9 * (r_norm / last_r_norm) * (r_norm / last_r_norm);
+        const double previous = 0.9 * forcing * forcing;
+        if (previous > 0.1) ew = std::max(ew, previous);
+        forcing = std::min(implicit_.max_forcing, ew);
+      }
+      // No oversolving: a linear residual below half the Newton tolerance
+      // cannot change the outcome of the convergence test.
+      const double residual_size = residual_norm(r_);
+      if (std::isfinite(residual_size) && residual_size > 0.0) {
+        forcing = std::min(implicit_.max_forcing,
+                           std::max(forcing, 0.5 * newton_tolerance() / residual_size));
+      }
+      last_r_norm = r_norm;
+    }
     r_ = -r_;
-    solve_iteration_matrix(r_, &dy_);
+    if (krylov) {
+      if (!krylov_direction(tf, h, x0, *x, r_, forcing, &dy_)) return false;
+    } else {
+      solve_iteration_matrix(r_, &dy_);
+    }
     // Line search. Where the method has a potential G (VIE's incremental
     // potential), the Newton direction of an SPD iteration matrix descends
     // G whatever approximations it holds, so the search heads for a
@@ -304,12 +448,16 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // converged iterate. Such updates are taken without a search.
     auto at_round_off = [&] {
       for (int k = 0; k < n; ++k) {
-        if (std::abs(dy_[k]) > std::max(std::abs((*x)[offset + k]), 1.0) * kZeroUpdate) return false;
+        if (std::abs(dy_[k]) > std::max(std::abs((*x)[offset + k]), 1.0) * kZeroUpdate)
+          return false;
       }
       return true;
     };
     const bool take_as_is = dy_.lpNorm<Eigen::Infinity>() <= newton_tolerance() || at_round_off();
-    const bool use_potential = potential_search(trial);
+    // The Krylov path is globalized from its first iteration on the
+    // residual merit: an inexact Newton direction with forcing < 1 on the
+    // true Jacobian descends it (Eisenstat & Walker 1994).
+    const bool use_potential = !krylov && potential_search(trial);
     double g_current = 0.0, slope = 0.0;
     if (use_potential) {
       // G itself is only needed by a search.
@@ -318,6 +466,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     }
     const bool descend_potential = use_potential && slope < 0.0;
     double alpha = 1.0;
+    bool retry = false;
     for (int backtrack = 0;; ++backtrack) {
       x_trial_ = *x;
       x_trial_.segment(offset, n) += alpha * dy_;
@@ -341,26 +490,42 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
         r_merit = trial_merit;
         break;
       }
-      if (backtrack == kMaxBacktracks) return false;
+      if (backtrack == kMaxBacktracks) {
+        // A Krylov direction that does not descend came from a solve
+        // against an old preconditioner that missed its tolerance: the
+        // iteration is repeated with a fresh factorization at this iterate.
+        if (!krylov || preconditioner_fresh_) return false;
+        refactor_failed_ = retry = true;
+        break;
+      }
       alpha *= 0.5;
       ++stats_.line_search_backtracks;
+    }
+    if (retry) {
+      r_ = -r_;  // back to the residual at the unchanged iterate
+      continue;
     }
     dx_ = x_trial_ - *x;
     x->swap(x_trial_);
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);
-    if (alpha < 1.0) {
+    if (alpha < 1.0 && !(krylov && residual_norm(r_) <= newton_tolerance())) {
       // A damped step says nothing about the rate of the undamped
       // iteration: the next full update is measured against the last full
       // one (or, with none yet, against the tolerance alone).
       continue;
+    }
+    // The residual itself: with W >= M the error of the iterate's
+    // unknowns is at most its residual in their units (r_i / m_i).
+    if (krylov && residual_norm(r_) <= newton_tolerance()) {
+      return passes_energy_guard(x0, *x, true);
     }
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
     if (c == Convergence::kConverged) return passes_energy_guard(x0, *x, true);
     // A search that decreased the potential made progress whatever the
     // update sizes say (a descent method on G cannot diverge); only the
     // iteration budget ends it.
-    if (c == Convergence::kDiverged && !descend_potential) return false;
+    if (c == Convergence::kDiverged && !descend_potential && !krylov) return false;
     last_norm = norm;
   }
   return false;
@@ -387,14 +552,140 @@ bool ImplicitIntegrator::passes_energy_guard(const Eigen::VectorXd& x0, const Ei
 bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& x0,
                                     const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
   ++stats_.newton_solves;
-  for (int trial = 1; trial <= kFullNewtonTrial; ++trial) {
-    if (newton(t0, h, x0, guess, trial, x)) {
-      if (caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));
-      return true;
-    }
-    if (!reuse_enabled()) return false;
+  // The rungs to climb. The chord ladder: reuse (1), refactor (2), fresh
+  // Jacobian (3), full Newton (4). The Krylov path starts with its own rung
+  // (it uses the current matrix at every iterate) and falls back to full
+  // Newton. `auto` runs whichever start has cost less per unit of
+  // simulated time lately (choose_start()).
+  // The strategy is chosen at the first factorization (it depends on the
+  // solver picked for the matrix): made here, the first solve uses it too.
+  if (!newton_solve_chosen_ && reuse_enabled()) {
+    factor_reason_ = FactorReason::kFirst;
+    compute_jacobian_and_factor(t0, x0, h);
   }
-  return false;
+  int rungs[4] = {1, 2, 3, kFullNewtonTrial};
+  int count = 4;
+  const bool auto_start = krylov_ && implicit_.newton_solve == NewtonSolve::kAuto;
+  const int start = krylov_ ? (auto_start ? choose_start() : kKrylovStart) : kChordStart;
+  if (start == kKrylovStart) {
+    rungs[0] = kKrylovTrial;
+    rungs[1] = kFullNewtonTrial;
+    count = 2;
+    ++stats_.krylov_first_solves;
+  }
+  const auto began = WallClock::now();
+  bool solved = false;
+  for (int k = 0; k < count && !solved; ++k) {
+    solved = newton(t0, h, x0, guess, rungs[k], x);
+    if (!solved && !reuse_enabled()) break;
+  }
+  if (auto_start) {
+    // Costs decay by half in about seven solves of that start, so the
+    // choice follows the scene as it changes (a sheet that starts to fold).
+    StartCost& c = start_costs_[start];
+    c.seconds = kStartCostDecay * c.seconds + seconds_since(began);
+    c.simulated = kStartCostDecay * c.simulated + (solved ? h : 0.0);
+    ++c.solves;
+  }
+  if (solved && caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));
+  return solved;
+}
+
+int ImplicitIntegrator::choose_start() {
+  // Untried starts are tried first (the chord before Krylov); then the
+  // cheaper per simulated second, with the other one tried every
+  // kStartExploration solves so a change of regime is noticed.
+  for (int s : {kChordStart, kKrylovStart}) {
+    if (start_costs_[s].solves == 0) return s;
+  }
+  auto cost = [](const StartCost& c) {
+    return c.simulated > 0.0 ? c.seconds / c.simulated : std::numeric_limits<double>::infinity();
+  };
+  const int best = cost(start_costs_[kKrylovStart]) < cost(start_costs_[kChordStart]) ? kKrylovStart
+                                                                                      : kChordStart;
+  // An exploration that lost doubles the interval to the next one (up to
+  // 16 times the shortest), so a start many times costlier than the other
+  // (the Krylov path on a chain of small dense bodies) is rarely paid for.
+  if (explored_) {
+    explored_ = false;
+    exploration_interval_ = best == last_best_
+                                ? std::min(2 * exploration_interval_, 16 * kStartExploration)
+                                : kStartExploration;
+  }
+  last_best_ = best;
+  if (++solves_since_exploration_ >= exploration_interval_) {
+    solves_since_exploration_ = 0;
+    explored_ = true;
+    return 1 - best;
+  }
+  return best;
+}
+
+bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::VectorXd& x0,
+                                          const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
+                                          double forcing, Eigen::VectorXd* dy) {
+  // The current Newton matrix, linearized at the iterate itself (with the
+  // step's mean acceleration in the inertial term, as full Newton does).
+  if (!caps_.constant_mass_matrix && dims_.nv > 0) {
+    inertial_acceleration_ = (x.segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
+    iterate_acceleration_ = true;
+  }
+  bool symmetric = false;
+  preconditioner_fresh_ = false;
+  if (refactor_first_ || refactor_due_ || refactor_failed_ || !iteration_matrix_factored()) {
+    // The preconditioner: the definite (clamped, symmetric) matrix at this
+    // iterate, so a sparse Cholesky keeps working.
+    factor_reason_ = refactor_failed_ ? FactorReason::kKrylovFailed
+                     : refactor_due_  ? FactorReason::kCostModel
+                                      : FactorReason::kFirst;
+    refactor_first_ = false;
+    preconditioner_fresh_ = true;
+    compute_jacobian(tf, x, 0.0);
+    const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
+    if (!factor_iteration_matrix(preconditioner, symmetric, h)) {
+      iterate_acceleration_ = false;
+      return false;
+    }
+  }
+  // The operator: the true Jacobian of the residual. Compressed springs keep
+  // their negative transverse stiffness and the damping force its
+  // derivative through the spring directions (unsymmetric). With both, the
+  // Newton iteration converges quadratically; without the damping term it
+  // converged linearly and cycled on a 32x32 cloth at h = 1/60, where
+  // h c / m = 21 makes damping the largest force.
+  exact_jacobian_ = true;
+  compute_jacobian(tf, x, 0.0);
+  exact_jacobian_ = false;
+  iterate_acceleration_ = false;
+
+  const SparseMatrix& A = form_iteration_matrix(h, &symmetric);
+  const auto start = WallClock::now();
+  auto apply = [&A](const Eigen::VectorXd& p, Eigen::VectorXd* Ap) { Ap->noalias() = A * p; };
+  auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+    solve_iteration_matrix(r, z);
+  };
+  const GmresResult krylov = gmres(apply, precondition, rhs, residual_scaling(), forcing,
+                                   implicit_.max_krylov_iterations, &gmres_, dy);
+  const double seconds = seconds_since(start);
+  stats_.krylov_seconds += seconds;
+  ++stats_.krylov_solves;
+  stats_.krylov_iterations += krylov.iterations;
+  stats_.krylov_max_iterations = std::max<long>(stats_.krylov_max_iterations, krylov.iterations);
+  if (!krylov.converged) {
+    // The preconditioner is too far from the current matrix: the next
+    // iteration refactors. This one goes on with what GMRES has, which
+    // still lowers the linearized residual.
+    ++stats_.krylov_failures;
+    refactor_failed_ = true;
+    return true;
+  }
+  // Cost model: the Krylov iterations beyond the first (with a fresh
+  // factorization one solve would have done) accumulate until they cost
+  // more than the last factorization did; then the next iteration
+  // refactors. A preconditioner that stays exact is never replaced.
+  krylov_excess_seconds_ += seconds * (krylov.iterations - 1) / krylov.iterations;
+  if (krylov_excess_seconds_ > last_factorization_seconds_) refactor_due_ = true;
+  return true;
 }
 
 void ImplicitIntegrator::add_estimator_share(const IntegratorStatistics& before,
@@ -417,7 +708,8 @@ bool ImplicitIntegrator::step_doubling(double h) {
   // The large step is the error estimator's share of the work (as in Drake).
   // It is tried first because it fails to converge more often.
   const IntegratorStatistics before = stats_;
-  const bool big_ok = solve_step(t0, h, x0, x0, &x_big_);
+  const Eigen::VectorXd& guess = krylov_path() ? predictor(h, x0) : x0;
+  const bool big_ok = solve_step(t0, h, x0, guess, &x_big_);
   add_estimator_share(before, &stats_);
   if (!big_ok) return false;
 
@@ -456,11 +748,18 @@ IntegratorReport ImplicitIntegrator::report() const {
   r.jacobian_scheme = to_string(implicit_.jacobian);
   r.jacobian_colours = jacobian_evaluator_.colours();
   r.newton_form = to_string(implicit_.newton_form);
+  if (newton_solve_chosen_) {
+    r.newton_solve = implicit_.full_newton ? "fresh" : krylov_ ? "krylov" : "chord";
+    r.newton_solve_reason = newton_solve_reason_;
+  }
   r.extrapolated = implicit_.extrapolate;
   const LinearSolverChoice& solver = matrices_[0].solver;
   if (solver.solver) {
     r.linear_solver = solver.solver->method();
     r.linear_solver_reason = solver.reason;
+    if (!solver.solver->factorization_note().empty()) {
+      r.linear_solver_reason += "; " + solver.solver->factorization_note();
+    }
     r.linear_solver_fallback = solver.solver->fallback_note();
   }
   return r;

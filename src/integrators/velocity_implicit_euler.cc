@@ -1,6 +1,8 @@
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/wall_clock.h"
@@ -97,7 +99,7 @@ void VelocityImplicitEuler::do_initialize() {
   zdot_.resize(d.nz);
 }
 
-bool VelocityImplicitEuler::form_and_factor(double h) {
+const SparseMatrix& VelocityImplicitEuler::form_iteration_matrix(double h, bool* symmetric) {
   const auto start = WallClock::now();
   const Dimensions& d = dims_;
   const ForceJacobians& J = jacobians_;
@@ -128,10 +130,10 @@ bool VelocityImplicitEuler::form_and_factor(double h) {
   // N = I, no z coupling, symmetric K and D, and the mass-matrix form.
   // Finite-difference and automatic Jacobians carry the unsymmetric terms
   // the analytic ones drop.
-  const bool symmetric = implicit_.newton_form == NewtonForm::kMassMatrix &&
-                         implicit_.jacobian == JacobianScheme::kAnalytic &&
-                         caps_.symmetric_jacobians && caps_.identity_velocity_map && d.nz == 0;
-  return factor_iteration_matrix(W, symmetric, h);
+  *symmetric = implicit_.newton_form == NewtonForm::kMassMatrix &&
+               implicit_.jacobian == JacobianScheme::kAnalytic && caps_.symmetric_jacobians &&
+               caps_.identity_velocity_map && d.nz == 0;
+  return W;
 }
 
 void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double h) {
@@ -206,6 +208,48 @@ double VelocityImplicitEuler::merit(const Eigen::VectorXd& r) const {
   return r.squaredNorm();
 }
 
+double VelocityImplicitEuler::residual_norm(const Eigen::VectorXd& r) const {
+  // Velocity units: W = M - h D - h^2 K >= M (D and the definite K are
+  // negative semidefinite), so |W^-1 r|_M <= |r|_{M^-1}: the velocity error
+  // left by a residual is at most the residual divided by the masses.
+  if (implicit_.newton_form != NewtonForm::kMassMatrix) return r.lpNorm<Eigen::Infinity>();
+  if (!caps_.diagonal_mass_matrix || mass_diagonal_ == nullptr) {
+    return std::numeric_limits<double>::infinity();
+  }
+  double largest = 0.0;
+  for (int i = 0; i < dims_.nv; ++i)
+    largest = std::max(largest, std::abs(r[i] / mass_diagonal_[i]));
+  for (int i = dims_.nv; i < r.size(); ++i) largest = std::max(largest, std::abs(r[i]));
+  return largest;
+}
+
+const Eigen::VectorXd& VelocityImplicitEuler::residual_scaling() {
+  // merit() divides the momentum rows by the masses.
+  if (implicit_.newton_form != NewtonForm::kMassMatrix || !caps_.diagonal_mass_matrix ||
+      mass_diagonal_ == nullptr) {
+    residual_scale_.resize(0);
+    return residual_scale_;
+  }
+  residual_scale_.resize(dims_.ny());
+  for (int i = 0; i < dims_.nv; ++i) residual_scale_[i] = 1.0 / mass_diagonal_[i];
+  residual_scale_.tail(dims_.nz).setOnes();
+  return residual_scale_;
+}
+
+const Eigen::VectorXd& VelocityImplicitEuler::predictor(double h, const Eigen::VectorXd& x0) {
+  // The step's velocities extrapolated from the last accepted step (the
+  // acceleration held): exact for a free fall, and the first iterate
+  // starts where the Newton direction has least to do.
+  const Dimensions& d = dims_;
+  const double h_prev = state_.t - previous_.t;
+  if (!(h_prev > 0.0) || &x0 != &state_.x || d.nv == 0) return x0;
+  predicted_ = x0;
+  predicted_.segment(d.nq, d.nv) +=
+      (h / h_prev) * (x0.segment(d.nq, d.nv) - previous_.x.segment(d.nq, d.nv));
+  complete_iterate(h, x0, &predicted_);
+  return predicted_;
+}
+
 double VelocityImplicitEuler::incremental_potential(double t, const Eigen::VectorXd& x0,
                                                     const Eigen::VectorXd& x, double h) {
   // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v.
@@ -240,7 +284,7 @@ bool VelocityImplicitEuler::potential_search(int trial) const {
   // reuse rungs (1, 2), whose solves are the common and easy ones, use the
   // residual with the energy guard behind it; the rungs that follow a
   // failure (3, 4), where spurious roots are met, use G.
-  return use_potential_merit_ && trial >= 3;
+  return has_potential() && trial >= 3;
 }
 
 double VelocityImplicitEuler::potential(double t, const Eigen::VectorXd& x0,
@@ -264,7 +308,8 @@ void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x)
 
 bool VelocityImplicitEuler::do_step(double h) {
   if (!estimating_error() && !extrapolating()) {
-    return solve_step(state_.t, h, state_.x, state_.x, &candidate_);
+    const Eigen::VectorXd& guess = krylov_path() ? predictor(h, state_.x) : state_.x;
+    return solve_step(state_.t, h, state_.x, guess, &candidate_);
   }
   return step_doubling(h);
 }

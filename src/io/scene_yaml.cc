@@ -21,8 +21,8 @@
 #include "stiffsim/model/articulated.h"
 #include "stiffsim/model/compliant.h"
 #include "stiffsim/model/particle_meshes.h"
-#include "stiffsim/model/urdf.h"
 #include "stiffsim/model/particles.h"
+#include "stiffsim/model/urdf.h"
 
 namespace stiffsim {
 
@@ -34,6 +34,7 @@ std::vector<std::string> linear_solver_names() {
 }
 std::vector<std::string> newton_form_names() { return {"mass-matrix", "generic"}; }
 std::vector<std::string> error_estimator_names() { return {"trapezoid", "doubling"}; }
+std::vector<std::string> newton_solve_names() { return {"auto", "chord", "krylov", "fresh"}; }
 
 namespace {
 
@@ -83,14 +84,22 @@ bool is_spring_block(const std::string& key) {
 std::vector<std::string> spring_keys() { return {"k", "c"}; }
 
 std::vector<std::string> simulation_keys() {
-  return {"integrator",     "t_final",
-          "step",           "fixed_step",
-          "error_estimate", "accuracy",
-          "sample_period",  "min_step",
-          "jacobian",       "linear_solver",
-          "newton_form",    "full_newton",
-          "reuse",          "definite_iteration_matrix",
-          "error_estimator"};
+  return {"integrator",
+          "t_final",
+          "step",
+          "fixed_step",
+          "error_estimate",
+          "accuracy",
+          "sample_period",
+          "min_step",
+          "jacobian",
+          "linear_solver",
+          "newton_form",
+          "full_newton",
+          "reuse",
+          "definite_iteration_matrix",
+          "error_estimator",
+          "newton_solve"};
 }
 
 std::string join(const std::vector<std::string>& items, const std::string& separator = ", ") {
@@ -571,6 +580,10 @@ void read_simulation(const Section& top, SceneConfig* config) {
     implicit.error_estimator =
         parse_error_estimator(s.choice_or("error_estimator", error_estimator_names(), ""));
   }
+  if (s.has("newton_solve")) {
+    implicit.newton_solve =
+        parse_newton_solve(s.choice_or("newton_solve", newton_solve_names(), ""));
+  }
   implicit.full_newton = s.boolean_or("full_newton", implicit.full_newton);
   implicit.reuse = s.boolean_or("reuse", implicit.reuse);
   implicit.definite_iteration_matrix =
@@ -592,7 +605,9 @@ std::vector<double> per_joint(const Section& c, const std::string& key, Range ra
     }
     return values;
   }
-  if (!n.IsMap()) c.fail(n, c.label(key) + " must be a number or a map joint name -> number, got " + node_kind(n));
+  if (!n.IsMap())
+    c.fail(n,
+           c.label(key) + " must be a number or a map joint name -> number, got " + node_kind(n));
   for (const auto& entry : n) {
     const std::string joint = entry.first.Scalar();
     const std::string what = c.label(key) + "." + joint;
@@ -603,7 +618,8 @@ std::vector<double> per_joint(const Section& c, const std::string& key, Range ra
                               " (not a moving joint of " + tree.file + ")");
     }
     if (!one_dof(i)) {
-      c.fail(entry.first, what + ": joint '" + joint + "' is " + joint_type_name(tree.bodies[i].type) +
+      c.fail(entry.first, what + ": joint '" + joint + "' is " +
+                              joint_type_name(tree.bodies[i].type) +
                               "; only 1-DOF joints take this setting");
     }
     values[i] = c.number_value(entry.second, what, range);
@@ -611,12 +627,14 @@ std::vector<double> per_joint(const Section& c, const std::string& key, Range ra
   return values;
 }
 
-int body_of_joint(const Section& c, const YAML::Node& key, const RigidTree& tree, const std::string& where) {
+int body_of_joint(const Section& c, const YAML::Node& key, const RigidTree& tree,
+                  const std::string& where) {
   const std::string joint = key.Scalar();
   for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
     if (tree.bodies[i].joint == joint) return static_cast<int>(i);
   }
-  c.fail(key, "unknown joint '" + joint + "' in " + where + " (not a moving joint of " + tree.file + ")");
+  c.fail(key, "unknown joint '" + joint + "' in " + where + " (not a moving joint of " + tree.file +
+                  ")");
 }
 
 // Values of one joint in `initial`: a number for a 1-DOF joint, a list of
@@ -628,14 +646,18 @@ void read_joint_values(const Section& c, const YAML::Node& value, const std::str
     return;
   }
   if (!value.IsSequence() || static_cast<int>(value.size()) != size) {
-    c.fail(value, what + " must be " + (size == 1 ? std::string("a number") : "a list of " + std::to_string(size) + " numbers") +
+    c.fail(value, what + " must be " +
+                      (size == 1 ? std::string("a number")
+                                 : "a list of " + std::to_string(size) + " numbers") +
                       ", got " + node_kind(value));
   }
-  for (int k = 0; k < size; ++k) out[k] = c.number_value(value[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
+  for (int k = 0; k < size; ++k)
+    out[k] = c.number_value(value[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
 }
 
-std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, const Eigen::Vector3d& g,
-                                   const std::filesystem::path& base_dir, std::vector<std::string>* notes) {
+std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
+                                   const Eigen::Vector3d& g, const std::filesystem::path& base_dir,
+                                   std::vector<std::string>* notes) {
   const std::string file = c.text("file");
   std::filesystem::path resolved(file);
   if (resolved.is_relative()) resolved = base_dir / resolved;
@@ -661,7 +683,8 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, co
   const std::vector<double> rest = per_joint(c, "joint_rest", Range::kFinite, tree, 0.0);
   const std::vector<double> damping = per_joint(c, "joint_damping", Range::kNonNegative, tree, 0.0);
   o.joint_forces.resize(tree.bodies.size());
-  for (std::size_t i = 0; i < tree.bodies.size(); ++i) o.joint_forces[i] = JointForce{k[i], rest[i], damping[i]};
+  for (std::size_t i = 0; i < tree.bodies.size(); ++i)
+    o.joint_forces[i] = JointForce{k[i], rest[i], damping[i]};
 
   // Offsets of the exact formulation's coordinates, in which `initial` is given.
   std::vector<int> qo, vo;
@@ -678,7 +701,8 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, co
     if (tree.bodies[i].type == JointType::kFloating) o.initial_q[qo[i] + 3] = 1.0;
   }
   if (c.has("initial")) {
-    const Section init(c.doc(), c.get("initial"), c.context(), "initial.", {"all_joints", "joints", "velocities"});
+    const Section init(c.doc(), c.get("initial"), c.context(), "initial.",
+                       {"all_joints", "joints", "velocities"});
     if (init.has("all_joints")) {
       const double a = init.number("all_joints", Range::kFinite);
       for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
@@ -689,7 +713,8 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, co
       if (!init.has(key)) continue;
       const YAML::Node m = init.get(key);
       const bool positions = std::string(key) == "joints";
-      if (!m.IsMap()) init.fail(m, init.label(key) + " must be a map joint name -> value, got " + node_kind(m));
+      if (!m.IsMap())
+        init.fail(m, init.label(key) + " must be a map joint name -> value, got " + node_kind(m));
       for (const auto& entry : m) {
         const int i = body_of_joint(init, entry.first, tree, init.label(key));
         const JointType type = tree.bodies[i].type;
@@ -701,12 +726,16 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name, co
     }
   }
   if (formulation == "exact") {
-    if (c.has("bushing")) c.fail(c.get("bushing"), "bushing applies to formulation: compliant only");
-    return with_location(c, name, [&] { return std::make_unique<ArticulatedSystem>(std::move(tree), std::move(o)); });
+    if (c.has("bushing"))
+      c.fail(c.get("bushing"), "bushing applies to formulation: compliant only");
+    return with_location(c, name, [&] {
+      return std::make_unique<ArticulatedSystem>(std::move(tree), std::move(o));
+    });
   }
   BushingParameters bp;
   if (c.has("bushing")) {
-    const Section b(c.doc(), c.get("bushing"), c.context(), "bushing.", {"k_lin", "c_lin", "k_ang", "c_ang"});
+    const Section b(c.doc(), c.get("bushing"), c.context(), "bushing.",
+                    {"k_lin", "c_lin", "k_ang", "c_ang"});
     bp.k_lin = b.number_or("k_lin", Range::kNonNegative, bp.k_lin);
     bp.c_lin = b.number_or("c_lin", Range::kNonNegative, bp.c_lin);
     bp.k_ang = b.number_or("k_ang", Range::kNonNegative, bp.k_ang);

@@ -24,7 +24,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_json(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 36 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 46 * 8,
                 "IntegratorStatistics changed: update statistics_json()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -60,11 +60,21 @@ json statistics_json(const IntegratorStatistics& s) {
   j["jacobian_approximated_terms"] = s.jacobian_approximated_terms;
   j["iteration_matrix_nonzeros"] = s.iteration_matrix_nonzeros;
   j["factor_nonzeros"] = s.factor_nonzeros;
+  j["krylov_first_solves"] = s.krylov_first_solves;
+  j["krylov_solves"] = s.krylov_solves;
+  j["krylov_iterations"] = s.krylov_iterations;
+  j["krylov_max_iterations"] = s.krylov_max_iterations;
+  j["krylov_failures"] = s.krylov_failures;
+  j["factorizations_ladder"] = s.factorizations_ladder;
+  j["factorizations_first"] = s.factorizations_first;
+  j["factorizations_cost_model"] = s.factorizations_cost_model;
+  j["factorizations_krylov_failed"] = s.factorizations_krylov_failed;
   j["jacobian_seconds"] = number(s.jacobian_seconds);
   j["assembly_seconds"] = number(s.assembly_seconds);
   j["factorization_seconds"] = number(s.factorization_seconds);
   j["solve_seconds"] = number(s.solve_seconds);
   j["derivative_seconds"] = number(s.derivative_seconds);
+  j["krylov_seconds"] = number(s.krylov_seconds);
   return j;
 }
 
@@ -78,6 +88,9 @@ json integrator_json(const IntegratorReport& r) {
   if (r.jacobian_colours > 0) j["jacobian_colours"] = r.jacobian_colours;
   j["jacobian_scheme"] = r.jacobian_scheme;
   j["newton_form"] = r.newton_form;
+  if (!r.newton_solve.empty()) {
+    j["newton_solve"] = {{"chosen", r.newton_solve}, {"reason", r.newton_solve_reason}};
+  }
   j["linear_solver"] = {{"chosen", r.linear_solver},
                         {"reason", r.linear_solver_reason},
                         {"fallback", r.linear_solver_fallback}};

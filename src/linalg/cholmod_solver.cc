@@ -165,15 +165,19 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   }
   // minor < n is where the factorization stopped; the status says so too.
   const bool pivot_failed = common_.status == CHOLMOD_NOT_POSDEF || factor_->minor < factor_->n;
-  const std::string at_factorization =
-      " at factorization " + std::to_string(counters_.factorizations);
-  const std::string pivot_position =
-      "pivot " + std::to_string(factor_->minor + 1) + " of " + std::to_string(n_);
+  // Messages are built only on the way to a fallback: a factorization that
+  // succeeds allocates nothing of ours.
+  auto at_factorization = [&] {
+    return " at factorization " + std::to_string(counters_.factorizations);
+  };
+  auto pivot_position = [&] {
+    return "pivot " + std::to_string(factor_->minor + 1) + " of " + std::to_string(n_);
+  };
 
   if (mode_ == Mode::kLLT) {
     if (!pivot_failed) return pivot_ratio_acceptable(cholmod_rcond(factor_, &common_), n_);
     switch_mode(Mode::kLDLT,
-                "matrix not positive definite (" + pivot_position + ")" + at_factorization);
+                "matrix not positive definite (" + pivot_position() + ")" + at_factorization());
     const auto start = Clock::now();
     analyze_with_cholmod(A);
     ++counters_.analyses;
@@ -186,10 +190,10 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   const double rcond = pivot_failed ? 0.0 : cholmod_rcond(factor_, &common_);
   if (!pivot_failed && pivot_ratio_acceptable(rcond, n_)) return true;
   switch_mode(Mode::kUmfpack,
-              (pivot_failed ? "CHOLMOD LDL^T met a zero pivot (" + pivot_position + ")"
+              (pivot_failed ? "CHOLMOD LDL^T met a zero pivot (" + pivot_position() + ")"
                             : "CHOLMOD LDL^T pivot ratio " + format_ratio(rcond) +
                                   " is at most n * epsilon") +
-                  at_factorization);
+                  at_factorization());
   free_factor_and_workspace();
   umfpack_ = std::make_unique<UmfpackSolver>();
   const auto start = Clock::now();

@@ -117,6 +117,7 @@ TEST(ImplicitEuler, RunsOnTheSparseUnsymmetricSolverAndReusesIt) {
   // (the trapezoid estimate has a test of its own).
   ImplicitSettings implicit;
   implicit.error_estimator = ImplicitErrorEstimate::kStepDoubling;
+  implicit.newton_solve = NewtonSolve::kChord;  // the reuse ladder is what is counted
   ImplicitEuler ie(*sys, s, implicit);
   ie.initialize(sys->initial_state());
   ie.integrate_to(0.2);
@@ -213,9 +214,11 @@ TEST_P(StaleMatrix, ReusedFromALargerStepStillConverges) {
   const double accuracy = 1e-3, h = 1e-3;
   std::unique_ptr<ImplicitIntegrator> integrator;
   if (std::string(GetParam()) == "ie") {
-    integrator = std::make_unique<ImplicitEuler>(*sys, fixed(h, false, accuracy), ImplicitSettings{});
+    integrator =
+        std::make_unique<ImplicitEuler>(*sys, fixed(h, false, accuracy), ImplicitSettings{});
   } else {
-    integrator = std::make_unique<VelocityImplicitEuler>(*sys, fixed(h, false, accuracy), ImplicitSettings{});
+    integrator = std::make_unique<VelocityImplicitEuler>(*sys, fixed(h, false, accuracy),
+                                                         ImplicitSettings{});
   }
   integrator->initialize(falling_cloth_state(*sys));
   const double t0 = integrator->state().t;

@@ -35,11 +35,12 @@ class ImplicitEuler : public ImplicitIntegrator {
 
   void compute_jacobian(double t, const Eigen::VectorXd& x, double h) override;
   bool jacobian_depends_on_step() const override { return true; }
-  bool form_and_factor(double h) override;
+  const SparseMatrix& form_iteration_matrix(double h, bool* symmetric) override;
   int unknowns_offset() const override { return 0; }
   void residual(double t, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                 Eigen::VectorXd* r) override;
   double merit(const Eigen::VectorXd& r) const override;
+  const Eigen::VectorXd& residual_scaling() override;
   void begin_newton(double t0, double h, const Eigen::VectorXd& x0) override;
 
  private:

@@ -40,14 +40,27 @@ struct IntegratorStatistics {
   // Extrapolated steps (vie2, ie2) that would have gained energy in a
   // passive scene and propagated the half-step result instead.
   long extrapolation_rejections = 0;
-  long velocity_map_evaluations = 0;   // N(q) products and assemblies (0 when N = I)
-  long mass_matrix_assemblies = 0;     // 1 for a constant M
-  long symbolic_analyses = 0;          // sparse orderings / elimination trees
+  long velocity_map_evaluations = 0;  // N(q) products and assemblies (0 when N = I)
+  long mass_matrix_assemblies = 0;    // 1 for a constant M
+  long symbolic_analyses = 0;         // sparse orderings / elimination trees
   long linear_solves = 0;
   long dense_output_evaluations = 0;     // derivative evaluations spent on dense output
   long jacobian_approximated_terms = 0;  // definite clamps in iteration matrices (Choi & Ko)
   long iteration_matrix_nonzeros = 0;
   long factor_nonzeros = 0;
+  // Krylov path (NewtonSolve::kKrylov): CG solves of the current Newton
+  // system, their products with it (total and the most in one solve), the
+  // solves that missed their tolerance within the iteration budget, and why
+  // each factorization happened.
+  long krylov_first_solves = 0;  // Newton solves that started on the Krylov path
+  long krylov_solves = 0;
+  long krylov_iterations = 0;
+  long krylov_max_iterations = 0;
+  long krylov_failures = 0;
+  long factorizations_ladder = 0;         // the chord's reuse ladder and full Newton
+  long factorizations_first = 0;          // no factorization yet, or one for another h (x4)
+  long factorizations_cost_model = 0;     // CG time since the last one exceeded a factorization's
+  long factorizations_krylov_failed = 0;  // a CG solve missed its tolerance
 
   // Wall time split, seconds.
   double jacobian_seconds = 0.0;
@@ -55,6 +68,7 @@ struct IntegratorStatistics {
   double factorization_seconds = 0.0;
   double solve_seconds = 0.0;
   double derivative_seconds = 0.0;
+  double krylov_seconds = 0.0;  // CG solves, their preconditioner solves included
 };
 
 // What an integrator says about itself for reports and stats files.
@@ -67,6 +81,8 @@ struct IntegratorReport {
   std::string jacobian_scheme;         // empty for explicit methods
   int jacobian_colours = 0;            // finite differences: column groups of the pattern
   std::string newton_form;             // "mass-matrix" or "generic"
+  std::string newton_solve;            // "chord", "krylov" or "fresh"
+  std::string newton_solve_reason;     // why
   std::string linear_solver;           // method in use
   std::string linear_solver_reason;    // why it was chosen
   std::string linear_solver_fallback;  // set if it fell back

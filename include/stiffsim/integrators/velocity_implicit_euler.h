@@ -39,7 +39,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
 
   void compute_jacobian(double t, const Eigen::VectorXd& x, double h) override;
   bool jacobian_depends_on_step() const override { return true; }
-  bool form_and_factor(double h) override;
+  const SparseMatrix& form_iteration_matrix(double h, bool* symmetric) override;
   // q_{k+1} = q_n + h N(q_k) v_{k+1}: N lagged one iterate.
   void complete_iterate(double h, const Eigen::VectorXd& x0, Eigen::VectorXd* x) override;
   int unknowns_offset() const override { return dims_.nq; }
@@ -48,6 +48,10 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   void residual(double t, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                 Eigen::VectorXd* r) override;
   double merit(const Eigen::VectorXd& r) const override;
+  double residual_norm(const Eigen::VectorXd& r) const override;
+  const Eigen::VectorXd& residual_scaling() override;
+  const Eigen::VectorXd& predictor(double h, const Eigen::VectorXd& x0) override;
+  bool has_potential() const override { return use_potential_merit_; }
   void begin_newton(double t0, double h, const Eigen::VectorXd& x0) override;
   bool potential_search(int trial) const override;
   double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double h,
@@ -62,7 +66,8 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   void evaluate_damping(double t, const Eigen::VectorXd& x);
   const double* mass_diagonal_ = nullptr;
   bool use_potential_merit_ = false;
-  double g_scale_ = 0.0;  // energy magnitude, for the round-off of G
+  Eigen::VectorXd predicted_;  // predictor()'s result
+  double g_scale_ = 0.0;       // energy magnitude, for the round-off of G
   ForceJacobians merit_jacobians_;
   State energy_state_;
   Eigen::VectorXd dv_, Dv_;

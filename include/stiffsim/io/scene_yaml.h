@@ -57,5 +57,6 @@ std::vector<std::string> jacobian_scheme_names();
 std::vector<std::string> linear_solver_names();
 std::vector<std::string> newton_form_names();
 std::vector<std::string> error_estimator_names();
+std::vector<std::string> newton_solve_names();
 
 }  // namespace stiffsim

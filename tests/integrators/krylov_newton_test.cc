@@ -1,0 +1,145 @@
+// The Krylov path of the Newton iteration (NewtonSolve::kKrylov): GMRES on
+// the current Newton matrix, preconditioned by the last factorization. Its
+// converged answers equal those of a fresh direct solve every iteration
+// within the Newton tolerance, and its cost model refactors when the
+// preconditioner is poor, never while it stays exact.
+
+#include <gtest/gtest.h>
+
+#include "stiffsim/integrators/implicit_euler.h"
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/model/compliant.h"
+#include "stiffsim/model/rigid_tree.h"
+#include "test_systems.h"
+
+namespace stiffsim {
+namespace {
+
+enum class Method { kVie, kIe };
+
+std::unique_ptr<ImplicitIntegrator> make(Method method, const System& sys, double h,
+                                         double accuracy, NewtonSolve solve) {
+  ImplicitSettings implicit;
+  implicit.newton_solve = solve;
+  if (method == Method::kVie) {
+    return std::make_unique<VelocityImplicitEuler>(sys, fixed(h, false, accuracy), implicit);
+  }
+  return std::make_unique<ImplicitEuler>(sys, fixed(h, false, accuracy), implicit);
+}
+
+struct OneStep {
+  Eigen::VectorXd x;
+  IntegratorStatistics stats;
+  std::string newton_solve;
+};
+
+// One step of h from `start` with the given solve.
+OneStep step_from(Method method, const System& sys, const State& start, double h, double accuracy,
+                  NewtonSolve solve) {
+  auto integrator = make(method, sys, h, accuracy, solve);
+  integrator->initialize(start);
+  integrator->integrate_to(start.t + h);
+  return {integrator->state().x, integrator->statistics(), integrator->report().newton_solve};
+}
+
+// A moving state: a few steps from rest with fresh matrices.
+State moving_state(Method method, const System& sys, double h, int steps) {
+  auto integrator = make(method, sys, h, 1e-8, NewtonSolve::kFresh);
+  integrator->initialize(sys.initial_state());
+  integrator->integrate_to(steps * h);
+  return integrator->state();
+}
+
+void expect_krylov_equals_fresh(Method method, const System& sys, double h) {
+  // Accuracy 1e-6: Newton tolerance 5e-8 on the weighted state change. Each
+  // solve stops with its estimated error below that tolerance, so the two
+  // answers differ by at most twice it; a factor 2 more allows for the
+  // estimates themselves (rate-based or residual-based, see
+  // check_newton_convergence and residual_norm).
+  const double accuracy = 1e-6, tolerance = 0.05 * accuracy;
+  const State start = moving_state(method, sys, h, 3);
+  const OneStep krylov = step_from(method, sys, start, h, accuracy, NewtonSolve::kKrylov);
+  const OneStep fresh = step_from(method, sys, start, h, accuracy, NewtonSolve::kFresh);
+  EXPECT_EQ(krylov.newton_solve, "krylov");
+  EXPECT_EQ(krylov.stats.krylov_first_solves, 1);
+  EXPECT_GT(krylov.stats.krylov_solves, 0);
+  EXPECT_EQ(krylov.stats.substep_failures, 0);
+  EXPECT_EQ(fresh.newton_solve, "fresh");
+  EXPECT_LE((krylov.x - fresh.x).lpNorm<Eigen::Infinity>(), 4 * tolerance);
+  // The step itself is far larger than the tolerance: the comparison means
+  // something.
+  EXPECT_GT((fresh.x - start.x).lpNorm<Eigen::Infinity>(), 1e3 * tolerance);
+}
+
+TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
+  const auto sys = cloth(16, 1e3);  // 768 DOFs: CHOLMOD
+  expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 60);
+}
+
+TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
+  const auto sys = cloth(12, 1e6);
+  expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
+}
+
+TEST(KrylovNewton, CompliantChainWithQuaternionsEqualsFreshDirectSolves) {
+  // 40 free bodies (quaternion positions, N(q) != I) on stiff bushings:
+  // 280 q, 240 v, an unsymmetric Newton matrix on UMFPACK.
+  const RigidTree tree = make_chain_tree(40);
+  ArticulatedOptions exact;
+  exact.initial_q = Eigen::VectorXd::Constant(static_cast<int>(tree.bodies.size()), 0.3);
+  BushingParameters b;
+  b.k_lin = 1e5;
+  b.k_ang = 1e3;
+  b.c_lin = 1.0;
+  b.c_ang = 0.01;
+  const auto sys = make_compliant(tree, exact, b);
+  ASSERT_TRUE(sys->capabilities().has_quaternions);
+  expect_krylov_equals_fresh(Method::kVie, *sys, 2e-3);
+}
+
+TEST(KrylovNewton, ImplicitEulerClothEqualsFreshDirectSolves) {
+  const auto sys = cloth(12, 1e3);  // 2 x 432 unknowns: UMFPACK
+  expect_krylov_equals_fresh(Method::kIe, *sys, 1.0 / 60);
+}
+
+// A rope at a step so small that h^2 K is a ten-thousandth of M: the first
+// factorization stays an exact preconditioner, every GMRES solve takes one
+// product, and the cost model (which charges only the products beyond the
+// first) never refactors.
+TEST(KrylovNewton, CostModelKeepsAnExactPreconditioner) {
+  RopeSpec spec;
+  spec.nodes = 101;  // 300 DOFs: CHOLMOD
+  spec.total_mass = 0.1;
+  spec.stretch = SpringParameters{1e3, 0.1};
+  spec.bend = SpringParameters{1.0, 0.01};
+  const ParticleSystem rope(make_rope(spec));
+  auto vie = make(Method::kVie, rope, 1e-6, 1e-6, NewtonSolve::kKrylov);
+  vie->initialize(rope.initial_state());
+  vie->integrate_to(50e-6);
+  const IntegratorStatistics& st = vie->statistics();
+  EXPECT_EQ(st.steps_taken, 50);
+  EXPECT_GT(st.krylov_solves, 0);
+  EXPECT_EQ(st.krylov_iterations, st.krylov_solves);
+  EXPECT_EQ(st.factorizations_cost_model, 0);
+  EXPECT_EQ(st.iteration_matrix_factorizations, 1);
+}
+
+// A falling cloth at h = 1/60: the sheet's geometric stiffness moves at
+// every iterate, GMRES needs many products per solve against an old
+// factorization, and the cost model refactors.
+TEST(KrylovNewton, CostModelRefactorsAPoorPreconditioner) {
+  const auto sys = cloth(24, 1e3);
+  auto vie = make(Method::kVie, *sys, 1.0 / 60, 1e-3, NewtonSolve::kKrylov);
+  vie->initialize(sys->initial_state());
+  vie->integrate_to(10.0 / 60);
+  const IntegratorStatistics& st = vie->statistics();
+  EXPECT_GT(st.krylov_iterations, 2 * st.krylov_solves);
+  EXPECT_GT(st.factorizations_cost_model, 0);
+  // Every factorization has its reason counted (the first included).
+  EXPECT_EQ(st.iteration_matrix_factorizations,
+            st.factorizations_first + st.factorizations_cost_model +
+                st.factorizations_krylov_failed + st.factorizations_ladder);
+}
+
+}  // namespace
+}  // namespace stiffsim
