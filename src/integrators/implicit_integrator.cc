@@ -1,5 +1,6 @@
 #include "stiffsim/integrators/implicit_integrator.h"
 
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -278,13 +279,19 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   linearization_.resize(nx);
   predictor_qdot_.resize(dims_.nq);
   energy_state_.x = Eigen::VectorXd::Zero(nx);
-  // Only where an implicit Euler step cannot gain energy: a passive scene
-  // with a constant mass matrix (the step minimizes an incremental
-  // potential). With a configuration-dependent M(q) (articulated bodies) the
-  // step's velocity-product terms trade O(h^2) energy either way, so a gain
-  // there is no sign of a spurious root.
+  // Only where the step's energy change obeys the identity of
+  // passes_energy_guard(): a passive scene with a constant mass matrix (the
+  // step minimizes an incremental potential). With a configuration-dependent
+  // M(q) (articulated bodies) the step's velocity-product terms trade O(h^2)
+  // energy either way as well.
   guard_energy_ =
       implicit_.energy_guard && caps_.has_energy && caps_.passive && caps_.constant_mass_matrix;
+  if (guard_energy_) {
+    guard_jacobians_ = system_.jacobian_pattern();
+    guard_q_.resize(dims_.nq);
+    guard_v_.resize(dims_.nv);
+    guard_z_ = Eigen::VectorXd::Zero(dims_.nz);
+  }
   jacobians_valid_ = false;
   invalidate_factorization();
   for (auto& m : matrices_) m.h = 0.0;
@@ -518,10 +525,10 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // The residual itself: with W >= M the error of the iterate's
     // unknowns is at most its residual in their units (r_i / m_i).
     if (krylov && residual_norm(r_) <= newton_tolerance()) {
-      return passes_energy_guard(x0, *x, true);
+      return passes_energy_guard(tf, h, x0, *x);
     }
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
-    if (c == Convergence::kConverged) return passes_energy_guard(x0, *x, true);
+    if (c == Convergence::kConverged) return passes_energy_guard(tf, h, x0, *x);
     // A search that decreased the potential made progress whatever the
     // update sizes say (a descent method on G cannot diverge); only the
     // iteration budget ends it.
@@ -531,22 +538,95 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   return false;
 }
 
-bool ImplicitIntegrator::passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
-                                             bool count) {
-  // For a scene whose forces are conservative or dissipative, an implicit
-  // Euler step that gains energy has found a spurious root of the step
-  // equations (a buckled or inverted configuration of stiff springs reached
-  // at a large h): the attempt counts as a failure and the step shrinks.
-  if (!guard_energy_ || energy_guard_suspended_) return true;
+double ImplicitIntegrator::energy_gain(const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                                       double* allowance) {
   energy_state_.x = x0;
   const double before = system_.energy(energy_state_);
   energy_state_.x = x;
   const double after = system_.energy(energy_state_);
   // Round-off of the energy sums and the Newton tolerance's share.
-  const double allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
-  if (after <= before + allowance) return true;
-  if (count) ++stats_.energy_guard_rejections;
-  return false;
+  *allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
+  return after - before;
+}
+
+double ImplicitIntegrator::negative_curvature(double t, const Eigen::VectorXd& q,
+                                              const Eigen::VectorXd& dq) {
+  // At v = 0 the damping forces (linear in v) have no q-derivative, so the
+  // exact dF/dq is minus the potential's Hessian.
+  JacobianRequest exact;
+  exact.complete = true;
+  guard_v_.setZero(dims_.nv);
+  system_.force_jacobians(t, q, guard_v_, guard_z_, exact, &guard_jacobians_);
+  return dq.dot(guard_jacobians_.dF_dq * dq);
+}
+
+bool ImplicitIntegrator::incremental_hessian_definite(double t, double h,
+                                                      const Eigen::VectorXd& x) {
+  // The Hessian of the step's incremental potential
+  // G(v) = 1/2 |v - v_n|_M^2 + Phi(q_n + h v) - h/2 v^T D v, exact (no
+  // clamped transverse stiffness): M - h D - h^2 K with K = -Hess Phi from
+  // the Jacobian at v = 0 and D = dF/dv at the root. Its symmetric part is
+  // tested: x^T H x > 0 for all x. A sparse LL^T fails exactly when a pivot
+  // is not positive.
+  const Dimensions& d = dims_;
+  JacobianRequest exact;
+  exact.complete = true;
+  guard_q_ = x.segment(0, d.nq);
+  guard_v_ = x.segment(d.nq, d.nv);
+  system_.force_jacobians(t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
+  const SparseMatrix D = guard_jacobians_.dF_dv;
+  guard_v_.setZero();
+  system_.force_jacobians(t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
+  const SparseMatrix H = mass_matrix_at(guard_q_) - h * D - (h * h) * guard_jacobians_.dF_dq;
+  const SparseMatrix Ht = H.transpose();
+  const SparseMatrix symmetric = 0.5 * (H + Ht);
+  Eigen::SimplicialLLT<SparseMatrix> llt(symmetric);
+  return llt.info() == Eigen::Success;
+}
+
+bool ImplicitIntegrator::passes_energy_guard(double tf, double h, const Eigen::VectorXd& x0,
+                                             const Eigen::VectorXd& x) {
+  // A converged step is a root of the step equations, not necessarily the
+  // one implicit Euler means: at a large h a stiff spring can buckle or
+  // invert into a root that is a saddle of the incremental potential G
+  // (whose minimizer is the step) and gains energy. Energy alone does not
+  // tell them apart: with constant M, N = I and damping forces F_d (v.F_d
+  // <= 0), any root satisfies the identity
+  //   E+ - E_n = -1/2 |v+ - v_n|_M^2 + h v+.F_d - B,
+  //   B = Phi(q_n) - Phi(q+) - grad Phi(q+).(q_n - q+)
+  //     = int_0^1 (1 - s) dq^T Hess Phi(q+ - s dq) dq ds,  dq = q+ - q_n,
+  // so on a non-convex Phi (a compressed spring's transverse stiffness
+  // k (1 - L/l) < 0) the genuine root gains up to
+  //   1/2 max_s dq^T K(q(s)) dq,  K = -Hess Phi,
+  // which is O(h^2) (one spring, k = 100, at l = 0.95 moving at 10 m/s
+  // across it gains 4.1e-4 of its energy at h = 0.01). The criterion, only
+  // evaluated when the energy rose beyond round-off:
+  // 1. the gain must stay within that bound, K sampled at q_n, the midpoint
+  //    and q+ and the largest value doubled for the curvature's variation
+  //    between the samples;
+  // 2. where G is the step's potential (N = I, no z states), its Hessian
+  //    M - h D - h^2 K at the root must be positive definite: a root where
+  //    it is not is no minimizer of G.
+  if (!guard_energy_ || energy_guard_suspended_) return true;
+  double allowance = 0.0;
+  const double gain = energy_gain(x0, x, &allowance);
+  if (gain <= allowance) return true;
+  ++stats_.energy_guard_checks;
+  const Dimensions& d = dims_;
+  const double tn = tf - h;
+  const Eigen::VectorXd q0 = x0.segment(0, d.nq), q1 = x.segment(0, d.nq);
+  const Eigen::VectorXd dq = q1 - q0;
+  double curvature = 0.0;
+  for (double s : {0.0, 0.5, 1.0}) {
+    const Eigen::VectorXd q = q0 + s * dq;
+    curvature = std::max(curvature, negative_curvature(tn + s * h, q, dq));
+  }
+  bool spurious = gain > curvature + allowance;  // 2 x 1/2 max dq^T K dq
+  if (!spurious && caps_.identity_velocity_map && d.nz == 0) {
+    spurious = !incremental_hessian_definite(tf, h, x);
+  }
+  if (spurious) ++stats_.energy_guard_rejections;
+  return !spurious;
 }
 
 bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& x0,
@@ -733,7 +813,8 @@ bool ImplicitIntegrator::step_doubling(double h) {
     // rest lengths, but a combination of two points of a curved manifold is
     // off it, and a stiff spring turns that distance into energy. In a
     // passive scene such a step propagates x_small, which passed the guard.
-    if (guard_energy_ && !passes_energy_guard(x0, candidate_, false)) {
+    double allowance = 0.0;
+    if (guard_energy_ && energy_gain(x0, candidate_, &allowance) > allowance) {
       ++stats_.extrapolation_rejections;
       candidate_.swap(x_small_);
     }

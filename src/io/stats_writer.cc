@@ -24,7 +24,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_json(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 46 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 47 * 8,
                 "IntegratorStatistics changed: update statistics_json()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -49,6 +49,7 @@ json statistics_json(const IntegratorStatistics& s) {
   j["newton_solves"] = s.newton_solves;
   j["newton_trials"] = s.newton_trials;
   j["line_search_backtracks"] = s.line_search_backtracks;
+  j["energy_guard_checks"] = s.energy_guard_checks;
   j["energy_guard_rejections"] = s.energy_guard_rejections;
   j["extrapolation_rejections"] = s.extrapolation_rejections;
   j["merit_damping_evaluations"] = s.merit_damping_evaluations;

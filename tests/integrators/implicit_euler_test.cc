@@ -166,6 +166,8 @@ TEST(ImplicitEuler, StiffClothNeverGainsEnergy) {
     ASSERT_TRUE(ie.state().x.allFinite()) << "t = " << ie.state().t;
     EXPECT_LE(sys->energy(ie.state()), e0 + 1e-9 * std::abs(e0)) << "t = " << ie.state().t;
   }
+  // Not because the energy criterion enforced it: it rejected no step.
+  EXPECT_EQ(ie.statistics().energy_guard_rejections, 0);
 }
 
 TEST(ImplicitEuler, DampsTheStiffLinearTestEquation) {

@@ -118,6 +118,147 @@ TEST(VelocityImplicitEuler, ReusesFactorizationsOnAClothRun) {
   EXPECT_LE(st.smallest_adapted_step_size_taken, st.largest_step_size_taken);
 }
 
+// One particle (mass 1) on a spring (k, rest length 1, no damping) to a
+// pinned anchor at the origin, no gravity, at (0.95, 0, 0) moving along y at
+// 10 m/s: the spring is compressed, so its potential is not convex across
+// it (transverse stiffness k (1 - L/l) < 0).
+struct CompressedSpring {
+  double k = 100.0, L = 1.0, length = 0.95, speed = 10.0;
+  std::unique_ptr<ParticleSystem> system() const {
+    ParticleDescription d;
+    d.name = "spring";
+    d.positions = {Eigen::Vector3d::Zero(), Eigen::Vector3d(length, 0, 0)};
+    d.masses = {1.0, 1.0};
+    d.springs = {Spring{0, 1, L, k, 0.0}};
+    d.pinned = {0};
+    d.gravity.setZero();
+    return std::make_unique<ParticleSystem>(d);
+  }
+  State initial(const System& sys) const {
+    State s = sys.initial_state();
+    s.x[4] = speed;
+    return s;
+  }
+  // The implicit Euler step q+ = q_n + h v+, v+ = v_n + h F(q+): F(q+) is
+  // parallel to q+, so q+ = s rho p / |p| with p = q_n + h v_n, s = +1 or
+  // -1, a = h^2 k and rho (1 + a (1 - L / rho)) = s |p|, i.e.
+  // rho = (a L + s |p|) / (1 + a). s = +1 is the root implicit Euler means
+  // (the minimizer of the incremental potential); s = -1 (the spring
+  // inverted through its anchor) exists when a L > |p| and is a saddle.
+  Eigen::VectorXd step(const State& s0, double h, int sign) const {
+    const Eigen::Vector3d q0 = s0.x.head(3), v0 = s0.x.segment(3, 3);
+    const Eigen::Vector3d p = q0 + h * v0;
+    const double a = h * h * k;
+    const double rho = (a * L + sign * p.norm()) / (1 + a);
+    Eigen::VectorXd x(6);
+    x.head(3) = sign * rho * p.normalized();
+    x.tail(3) = (x.head(3) - q0) / h;
+    return x;
+  }
+};
+
+// Exposes the Newton solve of one step from a chosen guess.
+class VieWithGuess : public VelocityImplicitEuler {
+ public:
+  using VelocityImplicitEuler::VelocityImplicitEuler;
+  bool solve_from(double h, const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
+    return solve_step(state().t, h, state().x, guess, x);
+  }
+};
+
+TEST(VelocityImplicitEuler, EnergyCriterionAcceptsTheGenuineRootThatGainsEnergy) {
+  // Implicit Euler on a non-convex potential gains O(h^2) energy at its
+  // unique root; the old guard (energy must not rise) shrank h a hundredfold
+  // here. The step must be the closed-form root, taken at once.
+  const CompressedSpring spring;
+  auto sys = spring.system();
+  const State s0 = spring.initial(*sys);
+  const double e0 = sys->energy(s0);
+  for (double h : {0.01, 1.25e-3}) {
+    // Accuracy 1e-12: the Newton tolerance (5e-14 m/s) is far below the
+    // 1e-10 comparison.
+    VelocityImplicitEuler vie(*sys, fixed(h, false, 1e-12), ImplicitSettings{});
+    vie.initialize(s0);
+    vie.step_at_most(h);
+    const IntegratorStatistics& st = vie.statistics();
+    ASSERT_DOUBLE_EQ(vie.state().t, h);
+    const Eigen::VectorXd root = spring.step(s0, h, +1);
+    EXPECT_LT((vie.state().x - root).lpNorm<Eigen::Infinity>(), 1e-10) << "h = " << h;
+    // The root really gains energy (4.1e-4 of it at h = 0.01, 7.8e-6 at
+    // h = 1.25e-3, as the issue measured), so the criterion was consulted.
+    const double gain = (sys->energy(vie.state()) - e0) / e0;
+    EXPECT_GT(gain, h == 0.01 ? 3e-4 : 5e-6) << "h = " << h;
+    EXPECT_LT(gain, h == 0.01 ? 5e-4 : 1e-5) << "h = " << h;
+    EXPECT_EQ(st.energy_guard_checks, 1) << "h = " << h;
+    EXPECT_EQ(st.energy_guard_rejections, 0) << "h = " << h;
+    EXPECT_EQ(st.substep_failures, 0) << "h = " << h;
+  }
+}
+
+TEST(VelocityImplicitEuler, EnergyCriterionRejectsASaddleRoot) {
+  // k = 1e4, h = 0.1: a = h^2 k = 100 > |p|, so the inverted root exists.
+  // There the incremental potential's Hessian 1 + h^2 k (1 - L / rho) is
+  // 1 - 2.4 < 0 across the spring: a saddle, which gains energy. Newton
+  // started on it stays there; the criterion must reject it, and the same
+  // solve started from the step's start must find the genuine root.
+  CompressedSpring spring;
+  spring.k = 1e4;
+  const double h = 0.1;
+  auto sys = spring.system();
+  const State s0 = spring.initial(*sys);
+  VieWithGuess vie(*sys, fixed(h, false, 1e-12), ImplicitSettings{});
+  vie.initialize(s0);
+  const Eigen::VectorXd saddle = spring.step(s0, h, -1);
+  State at_saddle(h, saddle);
+  ASSERT_GT(sys->energy(at_saddle), sys->energy(s0));
+  Eigen::VectorXd x(6);
+  EXPECT_FALSE(vie.solve_from(h, saddle, &x));
+  EXPECT_GT(vie.statistics().energy_guard_rejections, 0);
+
+  const long rejections = vie.statistics().energy_guard_rejections;
+  ASSERT_TRUE(vie.solve_from(h, s0.x, &x));
+  EXPECT_LT((x - spring.step(s0, h, +1)).lpNorm<Eigen::Infinity>(), 1e-10);
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, rejections);
+}
+
+TEST(VelocityImplicitEuler, EnergyCriterionRejectsNothingWhereNoRootIsSpurious) {
+  // The compressed spring swinging round its anchor for 2 s, fixed steps
+  // (h = 0.01, h w = 0.1) and error-controlled: every root is the unique
+  // one of the closed form above (a = h^2 k <= 0.01 < |p|), yet steps gain
+  // energy whenever the spring is compressed, so the criterion is consulted
+  // and must reject none.
+  const CompressedSpring spring;
+  auto sys = spring.system();
+  IntegratorSettings controlled;
+  controlled.max_step = 0.01;
+  controlled.accuracy = 1e-3;
+  for (const IntegratorSettings& s : {fixed(0.01, false, 1e-3), controlled}) {
+    VelocityImplicitEuler vie(*sys, s, ImplicitSettings{});
+    vie.initialize(spring.initial(*sys));
+    vie.integrate_to(2.0);
+    const IntegratorStatistics& st = vie.statistics();
+    EXPECT_DOUBLE_EQ(vie.state().t, 2.0);
+    EXPECT_GT(st.energy_guard_checks, 0) << s.fixed_step;
+    EXPECT_EQ(st.energy_guard_rejections, 0) << s.fixed_step;
+    EXPECT_EQ(st.substep_failures, 0) << s.fixed_step;
+  }
+  // The issue's rope (models/rope.yaml with 3 nodes and no damping), whose
+  // genuine steps the old guard rejected 4 times. (At this commit its steps
+  // no longer gain energy at all; the count must stay 0.)
+  RopeSpec spec;
+  spec.nodes = 3;
+  spec.length = 1.0;
+  spec.total_mass = 0.1;
+  spec.stretch = SpringParameters{1e5, 0.0};
+  spec.bend = SpringParameters{1.0, 0.0};
+  ParticleSystem rope(make_rope(spec));
+  VelocityImplicitEuler vie(rope, controlled, ImplicitSettings{});
+  vie.initialize(rope.initial_state());
+  vie.integrate_to(2.0);
+  EXPECT_DOUBLE_EQ(vie.state().t, 2.0);
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
+}
+
 TEST(VelocityImplicitEuler, StiffClothNeverGainsEnergy) {
   auto sys = cloth(16, 1e6);
   VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), ImplicitSettings{});
@@ -133,6 +274,8 @@ TEST(VelocityImplicitEuler, StiffClothNeverGainsEnergy) {
     // only allowance.
     EXPECT_LE(sys->energy(vie.state()), e0 + 1e-9 * std::abs(e0)) << "t = " << vie.state().t;
   }
+  // Not because the energy criterion enforced it: it rejected no step.
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
 }
 
 TEST(VelocityImplicitEuler, TighterAccuracyReducesTheError) {

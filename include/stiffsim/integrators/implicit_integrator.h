@@ -68,8 +68,11 @@ struct ImplicitSettings {
   // Iteration matrices may use the definite spring approximation
   // (JacobianRequest::definite) so CHOLMOD's LL^T keeps working.
   bool definite_iteration_matrix = true;
-  // In passive scenes (Capabilities::passive) a Newton solution whose energy
-  // exceeds the step's initial energy is rejected as a spurious root.
+  // In passive scenes (Capabilities::passive) a converged step whose energy
+  // rose is examined: it is rejected as a spurious root when it is a saddle
+  // of the incremental potential (M - h D - h^2 K not positive definite) or
+  // when it gained more than implicit Euler's O(h^2) gain allows (see
+  // passes_energy_guard()).
   bool energy_guard = true;
   // Step-doubling methods propagate 2 x_small - x_big (second order) rather
   // than x_small; fixed-step mode then also takes the three solves.
@@ -243,9 +246,19 @@ class ImplicitIntegrator : public IntegratorBase {
   // Factors the current iteration matrix for the Krylov path, timing it for
   // the cost model.
   bool refactor_preconditioner(const SparseMatrix& matrix, bool symmetric, double h);
-  // False when a converged step gained energy in a passive scene.
-  // `count`: a rejection counts as energy_guard_rejections.
-  bool passes_energy_guard(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, bool count);
+  // False when the converged step x of size h from x0 is a spurious root in
+  // a passive scene (see the definition); counted in energy_guard_checks
+  // and energy_guard_rejections.
+  bool passes_energy_guard(double tf, double h, const Eigen::VectorXd& x0,
+                           const Eigen::VectorXd& x);
+  // E(x) - E(x0), and its round-off allowance in *allowance.
+  double energy_gain(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double* allowance);
+  // dq^T K(q) dq with K = dF/dq of the conservative forces alone (the
+  // exact Jacobian at v = 0): minus the potential's curvature along dq.
+  double negative_curvature(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& dq);
+  // Whether M - h D - h^2 K at the state x (exact K, D; symmetric part) is
+  // positive definite: the Hessian of the incremental potential there.
+  bool incremental_hessian_definite(double t, double h, const Eigen::VectorXd& x);
 
   // Relative size of an update at the level of round-off (Drake's
   // IsUpdateZero tolerance).
@@ -308,6 +321,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // full-Newton iterate replaced it).
   double jacobian_step_t_ = 0.0, jacobian_step_h_ = 0.0;
   bool guard_energy_ = false;
+  ForceJacobians guard_jacobians_;  // exact Jacobians for the energy criterion
+  Eigen::VectorXd guard_q_, guard_v_, guard_z_;
   bool energy_guard_suspended_ = false;
   State energy_state_;
   Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_;

@@ -36,7 +36,11 @@ struct IntegratorStatistics {
   long newton_trials = 0;              // Newton iterations started (ladder rungs that ran)
   long line_search_backtracks = 0;     // halved Newton steps
   long merit_damping_evaluations = 0;  // damping matrices for the line-search merit
-  long energy_guard_rejections = 0;    // converged solves rejected for gaining energy
+  // Converged solves of passive scenes whose energy rose, so the energy
+  // criterion examined them (definiteness of the incremental potential's
+  // Hessian, the curvature bound on the gain), and those it rejected.
+  long energy_guard_checks = 0;
+  long energy_guard_rejections = 0;
   // Extrapolated steps (vie2, ie2) that would have gained energy in a
   // passive scene and propagated the half-step result instead.
   long extrapolation_rejections = 0;
