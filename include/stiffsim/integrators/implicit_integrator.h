@@ -96,7 +96,9 @@ class ImplicitIntegrator : public IntegratorBase {
   Convergence check_newton_convergence(int iteration, const Eigen::VectorXd& x,
                                        const Eigen::VectorXd& dx, double dx_norm,
                                        double last_dx_norm);
-  double newton_tolerance() const { return implicit_.newton_kappa * settings_.accuracy; }
+  // kappa * accuracy, or below it for an extrapolating step (see
+  // step_doubling()).
+  double newton_tolerance() const { return newton_tolerance_; }
   bool reuse_enabled() const { return implicit_.reuse && !implicit_.full_newton; }
 
   // Sizes the shared Newton workspaces for `unknowns` Newton unknowns
@@ -184,6 +186,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // 2 x_small - x_big), the error is x_big - x_small. The full step's work
   // counts as the error estimator's (as in Drake).
   bool step_doubling(double h);
+  // The Newton tolerance of the three solves of an extrapolating step of
+  // size h.
+  double extrapolation_newton_tolerance(double h) const;
   // Adds the work done since `before` to the error_estimator_* counters.
   static void add_estimator_share(const IntegratorStatistics& before, IntegratorStatistics* stats);
 
@@ -320,6 +325,10 @@ class ImplicitIntegrator : public IntegratorBase {
   // Step start and h of the Jacobian the ladder last evaluated (NaN after a
   // full-Newton iterate replaced it).
   double jacobian_step_t_ = 0.0, jacobian_step_h_ = 0.0;
+  double newton_tolerance_ = 0.0;
+  // The last extrapolated step: its size, |x_big - x_small| and
+  // |x_small - x_n| (weighted norms), for the next step's tolerance.
+  double extrapolated_h_ = 0.0, extrapolated_correction_ = 0.0, extrapolated_motion_ = 0.0;
   bool guard_energy_ = false;
   ForceJacobians guard_jacobians_;  // exact Jacobians for the energy criterion
   Eigen::VectorXd guard_q_, guard_v_, guard_z_;
