@@ -259,9 +259,15 @@ TEST(VelocityImplicitEuler, EnergyCriterionRejectsNothingWhereNoRootIsSpurious) 
   EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
 }
 
-TEST(VelocityImplicitEuler, StiffClothNeverGainsEnergy) {
+// Both ways of solving the Newton systems, each pinned: `auto` would pick
+// between them by wall time, so which one ran would vary from run to run.
+class StiffCloth : public ::testing::TestWithParam<NewtonSolve> {};
+
+TEST_P(StiffCloth, NeverGainsEnergy) {
   auto sys = cloth(16, 1e6);
-  VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), ImplicitSettings{});
+  ImplicitSettings implicit;
+  implicit.newton_solve = GetParam();
+  VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
   State s = sys->initial_state();
   vie.initialize(s);
   const double e0 = sys->energy(s);
@@ -276,7 +282,19 @@ TEST(VelocityImplicitEuler, StiffClothNeverGainsEnergy) {
   }
   // Not because the energy criterion enforced it: it rejected no step.
   EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
+  if (GetParam() == NewtonSolve::kKrylov) {
+    EXPECT_EQ(vie.report().newton_solve, "krylov");
+    EXPECT_GT(vie.statistics().krylov_solves, 0);
+  } else {
+    EXPECT_EQ(vie.statistics().krylov_solves, 0);
+  }
 }
+
+INSTANTIATE_TEST_SUITE_P(VelocityImplicitEuler, StiffCloth,
+                         ::testing::Values(NewtonSolve::kChord, NewtonSolve::kKrylov),
+                         [](const ::testing::TestParamInfo<NewtonSolve>& info) {
+                           return to_string(info.param);
+                         });
 
 TEST(VelocityImplicitEuler, TighterAccuracyReducesTheError) {
   auto sys = cloth(6, 1e3);
