@@ -214,7 +214,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   krylov_excess_seconds_ = 0.0;
   refactor_due_ = refactor_failed_ = false;
   if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
-  if (!newton_solve_chosen_) choose_newton_solve(symmetric);
+  if (!newton_solve_chosen_) choose_newton_solve();
   return m.factored;
 }
 
@@ -224,11 +224,10 @@ bool ImplicitIntegrator::form_and_factor(double h) {
   return factor_iteration_matrix(matrix, symmetric, h);
 }
 
-void ImplicitIntegrator::choose_newton_solve(bool symmetric) {
+void ImplicitIntegrator::choose_newton_solve() {
   // GMRES needs only a factorization to precondition with, of any kind
   // (LL^T, LDL^T, LU). Small systems, solved dense, keep the direct path:
   // there a factorization costs about what a few Krylov products do.
-  (void)symmetric;
   const std::string method = matrices_[active_].solver.solver->method();
   const bool sparse = method.rfind("dense", 0) != 0;
   const NewtonSolve asked = implicit_.newton_solve;
@@ -344,8 +343,7 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
       // h = 1e-3 at h = 1.4e-5 left a velocity residual of 1e-3 m/s with the
       // Newton tolerance at 5e-5). Refactoring from the last Jacobian, as
       // Hairer's codes do whenever h changes, is the second rung anyway.
-      if (matrices_[active_].h > kReuseStepRatio * h ||
-          h > kReuseStepRatio * matrices_[active_].h) {
+      if (formed_far_from(h)) {
         refactor_from_last_jacobian();
       }
       return Refresh::kProceed;
@@ -380,10 +378,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // formed for a step within kReuseStepRatio of h.
   const bool krylov = trial == kKrylovTrial && !implicit_.full_newton;
   if (krylov) {
-    const double h_f = matrices_[active_].h;
-    if (!iteration_matrix_factored() || h_f > kReuseStepRatio * h || h > kReuseStepRatio * h_f) {
-      refactor_first_ = true;
-    }
+    if (!iteration_matrix_factored() || formed_far_from(h)) refactor_first_ = true;
   } else if (!full_newton) {
     if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
     if (!iteration_matrix_factored()) return false;
@@ -407,16 +402,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   double last_r_norm = 0.0;
   for (int i = 0; i < max_iterations; ++i) {
     if (full_newton) {
-      // Linearize at the current iterate itself, with the step's own mean
-      // acceleration (v - v_n) / h in the inertial term.
-      if (!caps_.constant_mass_matrix && dims_.nv > 0) {
-        inertial_acceleration_ =
-            (x->segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
-        iterate_acceleration_ = true;
-      }
-      compute_jacobian(tf, *x, 0.0);
-      iterate_acceleration_ = false;
-      mark_jacobian_stale();
+      compute_jacobian_at_iterate(tf, h, x0, *x);
       if (!form_and_factor(h)) return false;
     }
     ++stats_.newton_raphson_iterations;
@@ -518,17 +504,16 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     x->swap(x_trial_);
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);
-    if (alpha < 1.0 && !(krylov && residual_norm(r_) <= newton_tolerance())) {
+    // The residual itself: with W >= M the error of the iterate's
+    // unknowns is at most its residual in their units (r_i / m_i).
+    const bool residual_converged = krylov && residual_norm(r_) <= newton_tolerance();
+    if (alpha < 1.0 && !residual_converged) {
       // A damped step says nothing about the rate of the undamped
       // iteration: the next full update is measured against the last full
       // one (or, with none yet, against the tolerance alone).
       continue;
     }
-    // The residual itself: with W >= M the error of the iterate's
-    // unknowns is at most its residual in their units (r_i / m_i).
-    if (krylov && residual_norm(r_) <= newton_tolerance()) {
-      return passes_energy_guard(tf, h, x0, *x);
-    }
+    if (residual_converged) return passes_energy_guard(tf, h, x0, *x);
     const Convergence c = check_newton_convergence(i, *x, dx_, norm, last_norm);
     if (c == Convergence::kConverged) return passes_energy_guard(tf, h, x0, *x);
     // A search that decreased the potential made progress whatever the
@@ -703,15 +688,23 @@ int ImplicitIntegrator::choose_start() {
   return best;
 }
 
-bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::VectorXd& x0,
-                                          const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
-                                          double forcing, Eigen::VectorXd* dy) {
-  // The current Newton matrix, linearized at the iterate itself (with the
-  // step's mean acceleration in the inertial term, as full Newton does).
+void ImplicitIntegrator::compute_jacobian_at_iterate(double tf, double h, const Eigen::VectorXd& x0,
+                                                     const Eigen::VectorXd& x) {
+  // Linearize at the iterate itself, with the step's own mean acceleration
+  // (v - v_n) / h in the inertial term.
   if (!caps_.constant_mass_matrix && dims_.nv > 0) {
     inertial_acceleration_ = (x.segment(dims_.nq, dims_.nv) - x0.segment(dims_.nq, dims_.nv)) / h;
     iterate_acceleration_ = true;
   }
+  compute_jacobian(tf, x, 0.0);
+  iterate_acceleration_ = false;
+  mark_jacobian_stale();
+}
+
+bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::VectorXd& x0,
+                                          const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
+                                          double forcing, Eigen::VectorXd* dy) {
+  // The current Newton matrix, linearized at the iterate itself.
   bool symmetric = false;
   preconditioner_fresh_ = false;
   if (refactor_first_ || refactor_due_ || refactor_failed_ || !iteration_matrix_factored()) {
@@ -722,12 +715,9 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
                                       : FactorReason::kFirst;
     refactor_first_ = false;
     preconditioner_fresh_ = true;
-    compute_jacobian(tf, x, 0.0);
+    compute_jacobian_at_iterate(tf, h, x0, x);
     const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
-    if (!factor_iteration_matrix(preconditioner, symmetric, h)) {
-      iterate_acceleration_ = false;
-      return false;
-    }
+    if (!factor_iteration_matrix(preconditioner, symmetric, h)) return false;
   }
   // The operator: the true Jacobian of the residual. Compressed springs keep
   // their negative transverse stiffness and the damping force its
@@ -736,9 +726,8 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
   // converged linearly and cycled on a 32x32 cloth at h = 1/60, where
   // h c / m = 21 makes damping the largest force.
   exact_jacobian_ = true;
-  compute_jacobian(tf, x, 0.0);
+  compute_jacobian_at_iterate(tf, h, x0, x);
   exact_jacobian_ = false;
-  iterate_acceleration_ = false;
 
   const SparseMatrix& A = form_iteration_matrix(h, &symmetric);
   const auto start = WallClock::now();

@@ -230,6 +230,8 @@ const Eigen::VectorXd& VelocityImplicitEuler::residual_scaling() {
     residual_scale_.resize(0);
     return residual_scale_;
   }
+  // A constant M gives the same scaling every solve: formed once.
+  if (caps_.constant_mass_matrix && residual_scale_.size() == dims_.ny()) return residual_scale_;
   residual_scale_.resize(dims_.ny());
   for (int i = 0; i < dims_.nv; ++i) residual_scale_[i] = 1.0 / mass_diagonal_[i];
   residual_scale_.tail(dims_.nz).setOnes();

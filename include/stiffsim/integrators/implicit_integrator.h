@@ -247,7 +247,17 @@ class ImplicitIntegrator : public IntegratorBase {
   bool krylov_direction(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                         const Eigen::VectorXd& rhs, double forcing, Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
-  void choose_newton_solve(bool symmetric);
+  void choose_newton_solve();
+  // Jacobian at the iterate x itself (full Newton, the Krylov path); marks
+  // it stale for the reuse ladder.
+  void compute_jacobian_at_iterate(double tf, double h, const Eigen::VectorXd& x0,
+                                   const Eigen::VectorXd& x);
+  // Whether the factorization was formed for a step more than
+  // kReuseStepRatio away from h.
+  bool formed_far_from(double h) const {
+    const double h_f = matrices_[active_].h;
+    return h_f > kReuseStepRatio * h || h > kReuseStepRatio * h_f;
+  }
   // Factors the current iteration matrix for the Krylov path, timing it for
   // the cost model.
   bool refactor_preconditioner(const SparseMatrix& matrix, bool symmetric, double h);
