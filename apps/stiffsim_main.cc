@@ -165,8 +165,10 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "matrix is symmetric positive definite and sparse, chord otherwise), "
                       "krylov (CG on the current matrix, preconditioned by the last "
                       "factorization, refactored by measured cost), chord (the last "
-                      "factorization as the Newton matrix, the reuse ladder) or fresh (a new "
-                      "Jacobian and factorization every iteration)")
+                      "factorization as the Newton matrix, the reuse ladder), fresh (a new "
+                      "Jacobian and factorization every iteration) or recursive (exact "
+                      "articulated trees: the articulated-body recursion, O(n) per iteration; "
+                      "auto's choice for VIE on trees of 16 or more joint velocities)")
           ->check(CLI::IsMember(newton_solve_names()))
           ->group(newton);
   run->add_flag("--full-newton", o->full_newton,

@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/structured_newton_matrix.h"
 
 namespace stiffsim {
 namespace {
@@ -58,67 +59,82 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
     caps_.has_quaternions |= k.has_quaternions;
   }
 
-  using P = std::pair<int, int>;
-  const auto& comps = components_;
-  mass_pattern_ = block_diagonal(
-      comps, offsets_, dims_.nv, dims_.nv,
-      [](const System& s) -> const SparseMatrix& { return s.mass_matrix_pattern(); },
-      [](const Dimensions& o) {
-        return P{o.nv, o.nv};
-      });
+  caps_.momentum_residual = true;
+  for (const auto& c : components_) caps_.momentum_residual &= c->capabilities().momentum_residual;
+
   if (!caps_.identity_velocity_map) {
     PatternBuilder b(dims_.nq, dims_.nv);
-    for (size_t i = 0; i < comps.size(); ++i) add_velocity_map_block(*comps[i], offsets_[i], &b);
+    for (size_t i = 0; i < components_.size(); ++i) {
+      add_velocity_map_block(*components_[i], offsets_[i], &b);
+    }
     velocity_map_pattern_ = b.build();
   }
-  auto jac = [&](SparseMatrix ForceJacobians::*m, int rows, int cols,
-                 std::function<P(const Dimensions&)> at) {
-    return block_diagonal(
-        comps, offsets_, rows, cols,
-        [m](const System& s) -> const SparseMatrix& { return s.jacobian_pattern().*m; }, at);
-  };
-  const Dimensions& D = dims_;
-  jacobian_pattern_.dF_dq = jac(&ForceJacobians::dF_dq, D.nv, D.nq, [](auto& o) {
-    return P{o.nv, o.nq};
-  });
-  jacobian_pattern_.dF_dv = jac(&ForceJacobians::dF_dv, D.nv, D.nv, [](auto& o) {
-    return P{o.nv, o.nv};
-  });
-  jacobian_pattern_.dF_dz = jac(&ForceJacobians::dF_dz, D.nv, D.nz, [](auto& o) {
-    return P{o.nv, o.nz};
-  });
-  jacobian_pattern_.dfz_dq = jac(&ForceJacobians::dfz_dq, D.nz, D.nq, [](auto& o) {
-    return P{o.nz, o.nq};
-  });
-  jacobian_pattern_.dfz_dv = jac(&ForceJacobians::dfz_dv, D.nz, D.nv, [](auto& o) {
-    return P{o.nz, o.nv};
-  });
-  jacobian_pattern_.dfz_dz = jac(&ForceJacobians::dfz_dz, D.nz, D.nz, [](auto& o) {
-    return P{o.nz, o.nz};
-  });
-
-  for (size_t i = 0; i < comps.size(); ++i) {
-    const System& c = *comps[i];
-    const Dimensions& o = offsets_[i];
-    Slots s;
-    s.M = slots_in(mass_pattern_, c.mass_matrix_pattern(), o.nv, o.nv);
-    if (!caps_.identity_velocity_map && !c.capabilities().identity_velocity_map) {
-      s.N = slots_in(velocity_map_pattern_, c.velocity_map_pattern(), o.nq, o.nv);
-    }
-    const ForceJacobians& J = c.jacobian_pattern();
-    s.dF_dq = slots_in(jacobian_pattern_.dF_dq, J.dF_dq, o.nv, o.nq);
-    s.dF_dv = slots_in(jacobian_pattern_.dF_dv, J.dF_dv, o.nv, o.nv);
-    s.dF_dz = slots_in(jacobian_pattern_.dF_dz, J.dF_dz, o.nv, o.nz);
-    s.dfz_dq = slots_in(jacobian_pattern_.dfz_dq, J.dfz_dq, o.nz, o.nq);
-    s.dfz_dv = slots_in(jacobian_pattern_.dfz_dv, J.dfz_dv, o.nz, o.nv);
-    s.dfz_dz = slots_in(jacobian_pattern_.dfz_dz, J.dfz_dz, o.nz, o.nz);
-    slots_.push_back(std::move(s));
-    scratch_M_.push_back(c.mass_matrix_pattern());
-    scratch_N_.push_back(caps_.identity_velocity_map || c.capabilities().identity_velocity_map
-                             ? SparseMatrix()
-                             : c.velocity_map_pattern());
-    scratch_J_.push_back(J);
+  for (size_t i = 0; i < components_.size(); ++i) {
+    const System& c = *components_[i];
+    const bool own_N = !caps_.identity_velocity_map && !c.capabilities().identity_velocity_map;
+    slots_N_.push_back(own_N ? slots_in(velocity_map_pattern_, c.velocity_map_pattern(),
+                                        offsets_[i].nq, offsets_[i].nv)
+                             : std::vector<int>());
+    scratch_N_.push_back(own_N ? c.velocity_map_pattern() : SparseMatrix());
   }
+}
+
+Scene::Patterns& Scene::patterns() const {
+  std::call_once(patterns_built_, [this] {
+    auto L = std::make_unique<Patterns>();
+    using P = std::pair<int, int>;
+    const auto& comps = components_;
+    L->mass = block_diagonal(
+        comps, offsets_, dims_.nv, dims_.nv,
+        [](const System& s) -> const SparseMatrix& { return s.mass_matrix_pattern(); },
+        [](const Dimensions& o) {
+          return P{o.nv, o.nv};
+        });
+    auto jac = [&](SparseMatrix ForceJacobians::*m, int rows, int cols,
+                   std::function<P(const Dimensions&)> at) {
+      return block_diagonal(
+          comps, offsets_, rows, cols,
+          [m](const System& s) -> const SparseMatrix& { return s.jacobian_pattern().*m; }, at);
+    };
+    const Dimensions& D = dims_;
+    ForceJacobians& J0 = L->jacobians;
+    J0.dF_dq = jac(&ForceJacobians::dF_dq, D.nv, D.nq, [](auto& o) {
+      return P{o.nv, o.nq};
+    });
+    J0.dF_dv = jac(&ForceJacobians::dF_dv, D.nv, D.nv, [](auto& o) {
+      return P{o.nv, o.nv};
+    });
+    J0.dF_dz = jac(&ForceJacobians::dF_dz, D.nv, D.nz, [](auto& o) {
+      return P{o.nv, o.nz};
+    });
+    J0.dfz_dq = jac(&ForceJacobians::dfz_dq, D.nz, D.nq, [](auto& o) {
+      return P{o.nz, o.nq};
+    });
+    J0.dfz_dv = jac(&ForceJacobians::dfz_dv, D.nz, D.nv, [](auto& o) {
+      return P{o.nz, o.nv};
+    });
+    J0.dfz_dz = jac(&ForceJacobians::dfz_dz, D.nz, D.nz, [](auto& o) {
+      return P{o.nz, o.nz};
+    });
+    for (size_t i = 0; i < comps.size(); ++i) {
+      const System& c = *comps[i];
+      const Dimensions& o = offsets_[i];
+      Slots s;
+      s.M = slots_in(L->mass, c.mass_matrix_pattern(), o.nv, o.nv);
+      const ForceJacobians& J = c.jacobian_pattern();
+      s.dF_dq = slots_in(J0.dF_dq, J.dF_dq, o.nv, o.nq);
+      s.dF_dv = slots_in(J0.dF_dv, J.dF_dv, o.nv, o.nv);
+      s.dF_dz = slots_in(J0.dF_dz, J.dF_dz, o.nv, o.nz);
+      s.dfz_dq = slots_in(J0.dfz_dq, J.dfz_dq, o.nz, o.nq);
+      s.dfz_dv = slots_in(J0.dfz_dv, J.dfz_dv, o.nz, o.nv);
+      s.dfz_dz = slots_in(J0.dfz_dz, J.dfz_dz, o.nz, o.nz);
+      L->slots.push_back(std::move(s));
+      L->scratch_M.push_back(c.mass_matrix_pattern());
+      L->scratch_J.push_back(J);
+    }
+    patterns_ = std::move(L);
+  });
+  return *patterns_;
 }
 
 State Scene::initial_state() const {
@@ -181,7 +197,7 @@ void Scene::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
       for (int k = 0; k < d.nv; ++k) N->coeffRef(o.nq + k, o.nv + k) = 1.0;
     } else {
       c.velocity_map(q.segment(o.nq, d.nq), &scratch_N_[i]);
-      scatter_add(scratch_N_[i], slots_[i].N, 1.0, N);
+      scatter_add(scratch_N_[i], slots_N_[i], 1.0, N);
     }
   }
 }
@@ -198,11 +214,12 @@ bool Scene::project_positions(VectorRef q) const {
 
 void Scene::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
   if (components_.size() == 1) return components_[0]->mass_matrix(q, M);
+  Patterns& L = patterns();
   set_zero_keep_pattern(M);
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions d = components_[i]->dimensions();
-    components_[i]->mass_matrix(q.segment(offsets_[i].nq, d.nq), &scratch_M_[i]);
-    scatter_add(scratch_M_[i], slots_[i].M, 1.0, M);
+    components_[i]->mass_matrix(q.segment(offsets_[i].nq, d.nq), &L.scratch_M[i]);
+    scatter_add(L.scratch_M[i], L.slots[i].M, 1.0, M);
   }
 }
 
@@ -214,6 +231,23 @@ void Scene::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
     components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), z.segment(o.nz, d.nz),
                            F.segment(o.nv, d.nv));
   }
+}
+
+void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                              const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                              VectorRef r) const {
+  for (size_t i = 0; i < components_.size(); ++i) {
+    const Dimensions d = components_[i]->dimensions();
+    const Dimensions& o = offsets_[i];
+    components_[i]->momentum_residual(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
+                                      z.segment(o.nz, d.nz), dv.segment(o.nv, d.nv), h,
+                                      r.segment(o.nv, d.nv));
+  }
+}
+
+std::unique_ptr<StructuredNewtonMatrix> Scene::make_structured_newton_matrix() const {
+  if (components_.size() != 1) return nullptr;
+  return components_[0]->make_structured_newton_matrix();
 }
 
 void Scene::misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
@@ -249,15 +283,16 @@ void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVecto
     set_zero_keep_pattern(m);
   }
   J->approximated_terms = 0;
+  Patterns& L = patterns();
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions d = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    ForceJacobians& c = scratch_J_[i];
+    ForceJacobians& c = L.scratch_J[i];
     JacobianRequest own = request;
     if (request.acceleration) own.acceleration = request.acceleration + o.nv;
     ((*components_[i]).*method)(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
                                 z.segment(o.nz, d.nz), own, &c);
-    const Slots& s = slots_[i];
+    const Slots& s = L.slots[i];
     scatter_add(c.dF_dq, s.dF_dq, 1.0, &J->dF_dq);
     scatter_add(c.dF_dv, s.dF_dv, 1.0, &J->dF_dv);
     scatter_add(c.dF_dz, s.dF_dz, 1.0, &J->dF_dz);

@@ -2,6 +2,8 @@
 
 #include <stdexcept>
 
+#include "stiffsim/structured_newton_matrix.h"
+
 namespace stiffsim {
 
 void System::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
@@ -30,6 +32,18 @@ void System::force_jacobians(double t, const ConstVectorRef& q, const ConstVecto
   throw std::logic_error(name() +
                          ": no analytic Jacobians; use a finite-difference scheme (forward or "
                          "central) or automatic");
+}
+
+void System::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                               const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                               VectorRef r) const {
+  (void)t, (void)q, (void)v, (void)z, (void)dv, (void)h, (void)r;
+  throw std::logic_error(name() + ": momentum_residual() is not implemented; check "
+                                  "capabilities().momentum_residual first");
+}
+
+std::unique_ptr<StructuredNewtonMatrix> System::make_structured_newton_matrix() const {
+  return nullptr;
 }
 
 void System::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -30,13 +31,19 @@ class Scene : public System {
   void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const override;
   bool project_positions(VectorRef q) const override;
 
-  const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
+  const SparseMatrix& mass_matrix_pattern() const override { return patterns().mass; }
   void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
   void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
               VectorRef F) const override;
   void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, VectorRef zdot) const override;
-  const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
+  // Every component's rows: one inverse-dynamics pass each.
+  void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                         const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                         VectorRef r) const override;
+  // The component's own when the scene has one component.
+  std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const override;
+  const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
@@ -66,16 +73,27 @@ class Scene : public System {
   std::vector<Dimensions> offsets_;
   Dimensions dims_;
   Capabilities caps_;
-  SparseMatrix mass_pattern_, velocity_map_pattern_;
-  ForceJacobians jacobian_pattern_;
+  SparseMatrix velocity_map_pattern_;
   // Per component, scratch matrices with the component's own patterns and
   // the slots of their entries in the scene's matrices.
   struct Slots {
-    std::vector<int> M, N, dF_dq, dF_dv, dF_dz, dfz_dq, dfz_dv, dfz_dz;
+    std::vector<int> M, dF_dq, dF_dv, dF_dz, dfz_dq, dfz_dv, dfz_dz;
   };
-  std::vector<Slots> slots_;
-  mutable std::vector<SparseMatrix> scratch_M_, scratch_N_;
-  mutable std::vector<ForceJacobians> scratch_J_;
+  // The patterns of M and of the Jacobians, built on first use (a run on a
+  // structured Newton matrix never asks for them; an exact chain's are
+  // dense).
+  struct Patterns {
+    SparseMatrix mass;
+    ForceJacobians jacobians;
+    std::vector<Slots> slots;
+    std::vector<SparseMatrix> scratch_M;
+    std::vector<ForceJacobians> scratch_J;
+  };
+  Patterns& patterns() const;
+  mutable std::once_flag patterns_built_;
+  mutable std::unique_ptr<Patterns> patterns_;
+  std::vector<std::vector<int>> slots_N_;
+  mutable std::vector<SparseMatrix> scratch_N_;
 };
 
 }  // namespace stiffsim

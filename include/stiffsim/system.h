@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <limits>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,8 @@
 #include "stiffsim/state.h"
 
 namespace stiffsim {
+
+class StructuredNewtonMatrix;
 
 using VectorRef = Eigen::Ref<Eigen::VectorXd>;
 using ConstVectorRef = Eigen::Ref<const Eigen::VectorXd>;
@@ -29,6 +32,8 @@ struct Capabilities {
   // Every force is conservative (in energy()) or dissipative, so the true
   // motion never gains energy.
   bool passive = false;
+  // momentum_residual() evaluates M(q) dv - h F without forming M.
+  bool momentum_residual = false;
 };
 
 // Force Jacobians, each with a pattern that is fixed for the lifetime of the
@@ -107,6 +112,16 @@ class System {
                                 const ConstVectorRef& z, VectorRef zdot) const {
     (void)t, (void)q, (void)v, (void)z, (void)zdot;
   }
+
+  // r = M(q) dv - h F(t, q, v, z), the momentum rows of a velocity-implicit
+  // residual; only called when capabilities().momentum_residual (an
+  // articulated tree: one inverse-dynamics pass, no mass matrix).
+  virtual void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                 const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                                 VectorRef r) const;
+  // A Newton matrix this system factors by its own structure (see
+  // structured_newton_matrix.h), or null when it has none.
+  virtual std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const;
 
   // --- Jacobians with fixed patterns. ---
   // Matrices sized and structured as force_jacobians() fills them.

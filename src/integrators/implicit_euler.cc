@@ -31,6 +31,7 @@ bool ImplicitEuler::uses_doubling() const {
 }
 
 void ImplicitEuler::do_initialize() {
+  load_jacobian_patterns();
   const Dimensions& d = dims_;
   const ForceJacobians& J = jacobians_;
   const int q0 = 0, v0 = d.nq, z0 = d.nq + d.nv;

@@ -78,7 +78,9 @@ void IntegratorBase::initialize(const State& initial) {
   initial_energy_ = watch_energy_ ? system_.energy(initial) : 0.0;
   candidate_.resize(dims_.nx());
   error_.resize(estimating_error() ? dims_.nx() : 0);
-  mass_matrix_ = system_.mass_matrix_pattern();
+  // The pattern is taken on first use: a run on a structured Newton matrix
+  // (a long exact chain, whose M is dense) may never need it.
+  mass_matrix_ = SparseMatrix();
   mass_matrix_valid_ = false;
   mass_solver_.reset();
   mass_solver_factored_ = false;
@@ -300,8 +302,10 @@ void IntegratorBase::integrate_to(double t_final) {
 }
 
 const SparseMatrix& IntegratorBase::mass_matrix_at(const ConstVectorRef& q) {
-  if (caps_.constant_mass_matrix && mass_matrix_valid_) return mass_matrix_;
+  if (mass_matrix_valid_ && (caps_.constant_mass_matrix || q == mass_q_)) return mass_matrix_;
   const auto start = WallClock::now();
+  if (mass_matrix_.rows() == 0) mass_matrix_ = system_.mass_matrix_pattern();
+  mass_q_ = q;
   system_.mass_matrix(q, &mass_matrix_);
   stats_.assembly_seconds += seconds_since(start);
   ++stats_.mass_matrix_assemblies;

@@ -41,10 +41,27 @@ VelocityImplicitEuler::VelocityImplicitEuler(const System& system, IntegratorSet
         "the generic Newton form (I - h J_l) is only available for diagonal mass matrices, "
         "where M^-1 keeps the sparsity; use the mass-matrix form");
   }
+  choose_structured_newton_matrix(
+      implicit_.newton_form == NewtonForm::kMassMatrix && dims_.nz == 0,
+      "the recursion solves VIE's mass-matrix form of systems without misc states");
 }
 
 void VelocityImplicitEuler::do_initialize() {
   const Dimensions& d = dims_;
+  residual_state_.resize(d.nx());
+  energy_state_.x = Eigen::VectorXd::Zero(d.nx());
+  dv_.resize(d.nv);
+  qdot_.resize(d.nq);
+  F_.resize(d.nv);
+  zdot_.resize(d.nz);
+  if (structured()) {
+    // No assembled matrix, Jacobian or pattern: the system's recursion is
+    // the Newton matrix.
+    use_potential_merit_ = false;
+    initialize_newton(d.ny());
+    return;
+  }
+  load_jacobian_patterns();
   const ForceJacobians& J = jacobians_;
   const bool identity_N = caps_.identity_velocity_map;
   if (!identity_N) {
@@ -80,23 +97,17 @@ void VelocityImplicitEuler::do_initialize() {
   for (int i = 0; i < d.ny(); ++i) identity_slots_[i] = slot_of(iteration_matrix_, i, i);
 
   initialize_newton(d.ny());
-  residual_state_.resize(d.nx());
-  energy_state_.x = Eigen::VectorXd::Zero(d.nx());
   // G is a valid merit where the residual is its gradient: the mass-matrix
   // form of a passive scene with energy, analytic Jacobians, N = I, a
   // constant diagonal M and no z states.
   use_potential_merit_ = implicit_.newton_form == NewtonForm::kMassMatrix && caps_.has_energy &&
                          caps_.passive && caps_.analytic_jacobians && caps_.identity_velocity_map &&
                          caps_.diagonal_mass_matrix && caps_.constant_mass_matrix && d.nz == 0;
-  dv_.resize(d.nv);
   if (use_potential_merit_) {
     merit_jacobians_ = system_.jacobian_pattern();
     Dv_.resize(d.nv);
     g_scale_ = 0.0;
   }
-  qdot_.resize(d.nq);
-  F_.resize(d.nv);
-  zdot_.resize(d.nz);
 }
 
 const SparseMatrix& VelocityImplicitEuler::form_iteration_matrix(double h, bool* symmetric) {
@@ -142,14 +153,11 @@ void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x,
   if (!caps_.identity_velocity_map) {
     system_.velocity_map(x.segment(0, d.nq), &N_);  // N(q_n): lagged, as the seed says
     ++stats_.velocity_map_evaluations;
-    // The products K N and dfz/dq N keep their (structural) pattern; their
-    // slots are looked up again because Eigen may order a product freshly.
-    KN_ = jacobians_.dF_dq * N_;
-    ZqN_ = jacobians_.dfz_dq * N_;
-    KN_.makeCompressed();
-    ZqN_.makeCompressed();
-    slots_K_ = slots_in(iteration_matrix_, KN_);
-    slots_Zq_ = slots_in(iteration_matrix_, ZqN_, d.nv, 0);
+    // The products K N and dfz/dq N into their structural patterns, so
+    // their slots in the iteration matrix stay valid and nothing is
+    // allocated.
+    multiply_into_pattern(jacobians_.dF_dq, N_, &KN_, &product_marker_);
+    multiply_into_pattern(jacobians_.dfz_dq, N_, &ZqN_, &product_marker_);
   }
 }
 
@@ -166,9 +174,24 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
     ++stats_.velocity_map_evaluations;
     residual_state_.segment(0, d.nq) = x0.segment(0, d.nq) + h * qdot_;
   }
-  evaluate_forces(t, residual_state_, &F_, &zdot_);
   const auto v = x.segment(d.nq, d.nv);
   const auto v0 = x0.segment(d.nq, d.nv);
+  if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.momentum_residual &&
+      !caps_.constant_mass_matrix) {
+    // One inverse-dynamics pass at the acceleration (v - v_n) / h: M(q) is
+    // never formed for a residual.
+    const auto start = WallClock::now();
+    const auto q = residual_state_.segment(0, d.nq);
+    const auto z = residual_state_.segment(d.nq + d.nv, d.nz);
+    dv_ = v - v0;
+    system_.momentum_residual(t, q, v, z, dv_, h, r->segment(0, d.nv));
+    if (d.nz > 0) system_.misc_derivatives(t, q, v, z, zdot_);
+    ++stats_.derivative_evaluations;
+    stats_.derivative_seconds += seconds_since(start);
+    r->segment(d.nv, d.nz) = x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
+    return;
+  }
+  evaluate_forces(t, residual_state_, &F_, &zdot_);
   const SparseMatrix& M = mass_matrix_at(residual_state_.segment(0, d.nq));
   if (implicit_.newton_form == NewtonForm::kMassMatrix && caps_.diagonal_mass_matrix) {
     const double* m = M.valuePtr();
@@ -310,7 +333,8 @@ void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x)
 
 bool VelocityImplicitEuler::do_step(double h) {
   if (!estimating_error() && !extrapolating()) {
-    const Eigen::VectorXd& guess = krylov_path() ? predictor(h, state_.x) : state_.x;
+    const Eigen::VectorXd& guess =
+        krylov_path() || structured() ? predictor(h, state_.x) : state_.x;
     return solve_step(state_.t, h, state_.x, guess, &candidate_);
   }
   return step_doubling(h);

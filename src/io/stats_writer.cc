@@ -24,7 +24,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_json(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 47 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 48 * 8,
                 "IntegratorStatistics changed: update statistics_json()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -67,6 +67,7 @@ json statistics_json(const IntegratorStatistics& s) {
   j["krylov_max_iterations"] = s.krylov_max_iterations;
   j["krylov_failures"] = s.krylov_failures;
   j["factorizations_ladder"] = s.factorizations_ladder;
+  j["recursive_factorizations"] = s.recursive_factorizations;
   j["factorizations_first"] = s.factorizations_first;
   j["factorizations_cost_model"] = s.factorizations_cost_model;
   j["factorizations_krylov_failed"] = s.factorizations_krylov_failed;

@@ -149,4 +149,34 @@ bool is_structurally_symmetric(const SparseMatrix& A) {
   return true;
 }
 
+void multiply_into_pattern(const SparseMatrix& A, const SparseMatrix& B, SparseMatrix* C,
+                           std::vector<int>* marker) {
+  if (A.cols() != B.rows() || C->rows() != A.rows() || C->cols() != B.cols()) {
+    throw std::invalid_argument("multiply_into_pattern: sizes do not match");
+  }
+  // The marker is all -1 between columns.
+  if (static_cast<Eigen::Index>(marker->size()) != A.rows()) marker->assign(A.rows(), -1);
+  double* out = C->valuePtr();
+  for (int j = 0; j < B.outerSize(); ++j) {
+    const int begin = C->outerIndexPtr()[j];
+    for (int k = begin; k < C->outerIndexPtr()[j + 1]; ++k) {
+      (*marker)[C->innerIndexPtr()[k]] = k;
+      out[k] = 0.0;
+    }
+    for (SparseMatrix::InnerIterator b(B, j); b; ++b) {
+      for (SparseMatrix::InnerIterator a(A, b.row()); a; ++a) {
+        const int slot = (*marker)[a.row()];
+        if (slot < 0) {
+          for (int k = begin; k < C->outerIndexPtr()[j + 1]; ++k) (*marker)[C->innerIndexPtr()[k]] = -1;
+          throw std::invalid_argument("multiply_into_pattern: the product reaches (" +
+                                      std::to_string(a.row()) + ", " + std::to_string(j) +
+                                      "), outside C's pattern");
+        }
+        out[slot] += a.value() * b.value();
+      }
+    }
+    for (int k = begin; k < C->outerIndexPtr()[j + 1]; ++k) (*marker)[C->innerIndexPtr()[k]] = -1;
+  }
+}
+
 }  // namespace stiffsim

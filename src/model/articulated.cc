@@ -1,12 +1,14 @@
 #include "stiffsim/model/articulated.h"
 
-#include <Eigen/SparseCholesky>
 #include <unsupported/Eigen/AutoDiff>
 #include <cmath>
 #include <sstream>
+#include <type_traits>
 
 #include "stiffsim/error.h"
 #include "stiffsim/linalg/column_colouring.h"
+#include "stiffsim/model/articulated_body_solver.h"
+#include "stiffsim/model/inverse_dynamics.h"
 #include "stiffsim/model/joints.h"
 #include "stiffsim/model/quaternion.h"
 
@@ -33,14 +35,14 @@ struct FreeBodyState {
   Vec3<T> velocity, omega;  // world frame
 };
 
-template <typename T>
-FreeBodyState<T> free_body_state(const VecX<T>& q, const VecX<T>& v, int qo, int vo) {
+template <typename T, typename Q, typename V>
+FreeBodyState<T> free_body_state(const Q& q, const V& v, int qo, int vo) {
   FreeBodyState<T> s;
-  Eigen::Matrix<T, 4, 1> quat = q.template segment<4>(qo + 3);
+  Eigen::Matrix<T, 4, 1> quat = q.template segment<4>(qo + 3).template cast<T>();
   s.pose.R = quaternion_rotation<T>(quat);
-  s.pose.p = q.template segment<3>(qo);
-  s.velocity = v.template segment<3>(vo);
-  s.omega = s.pose.R * Vec3<T>(v.template segment<3>(vo + 3));
+  s.pose.p = q.template segment<3>(qo).template cast<T>();
+  s.velocity = v.template segment<3>(vo).template cast<T>();
+  s.omega = s.pose.R * Vec3<T>(v.template segment<3>(vo + 3).template cast<T>());
   return s;
 }
 
@@ -86,8 +88,8 @@ struct BushingFrames {
   Vec3<T> n;              // joint axis in the world (fixed to the parent)
 };
 
-template <typename T>
-BushingFrames<T> bushing_frames(const Bushing& bu, const VecX<T>& q, const VecX<T>& v,
+template <typename T, typename Q, typename V>
+BushingFrames<T> bushing_frames(const Bushing& bu, const Q& q, const V& v,
                                 const std::vector<int>& qo, const std::vector<int>& vo) {
   BushingFrames<T> fr;
   if (bu.parent >= 0) {
@@ -122,9 +124,9 @@ T bushing_angle(const Bushing& bu, const BushingFrames<T>& fr, Vec3<T>* gradient
 }
 
 // Adds bushing `bu`'s generalized forces to F.
-template <typename T>
-void add_bushing_forces(const Bushing& bu, const VecX<T>& q, const VecX<T>& v,
-                        const std::vector<int>& qo, const std::vector<int>& vo, VecX<T>* F) {
+template <typename T, typename Q, typename V>
+void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::vector<int>& qo,
+                        const std::vector<int>& vo, VecX<T>* F) {
   const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, qo, vo);
   const BushingGeometry g = bushing_geometry(bu.type);
   const Vec3<T>& n = fr.n;
@@ -215,26 +217,36 @@ bool is_free_root(const TreeBody& b) {
 
 }  // namespace
 
+struct ArticulatedSystem::DualWorkspace {
+  explicit DualWorkspace(const ArticulatedModel& model)
+      : q(model.nq), v(model.nv), data(model) {}
+  VecX<Dual> q, v;
+  ArticulatedData<Dual> data;
+};
+
+ArticulatedSystem::~ArticulatedSystem() = default;
+
 ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
-    : tree_(std::move(tree)), options_(std::move(options)) {
-  const int nb = static_cast<int>(tree_.bodies.size());
-  const std::string w = where(tree_);
+    : options_(std::move(options)) {
+  model_.tree = std::move(tree);
+  const int nb = static_cast<int>(model_.tree.bodies.size());
+  const std::string w = where(model_.tree);
   if (nb == 0) throw InputError(w + ": the URDF has no moving body");
   for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree_.bodies[i];
+    const TreeBody& b = model_.tree.bodies[i];
     if (b.parent >= i || b.parent < -1) {
       throw InputError(w + ": body '" + b.link + "' comes before its parent");
     }
-    q_offset_.push_back(dims_.nq);
-    v_offset_.push_back(dims_.nv);
+    model_.q_offset.push_back(dims_.nq);
+    model_.v_offset.push_back(dims_.nv);
     dims_.nq += joint_nq(b.type);
     dims_.nv += joint_nv(b.type);
-    has_floating_ |= b.type == JointType::kFloating;
+    model_.has_floating |= b.type == JointType::kFloating;
     SpatialInertia I;
     I.mass = b.inertia.mass;
     I.com = b.inertia.com;
     I.inertia_com = b.inertia.inertia;
-    inertia_.push_back(I);
+    model_.inertia.push_back(I);
   }
   if (!options_.joint_forces.empty() && static_cast<int>(options_.joint_forces.size()) != nb) {
     throw InputError(w + ": joint forces given for " + std::to_string(options_.joint_forces.size()) +
@@ -242,7 +254,7 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   }
   for (int i = 0; i < static_cast<int>(options_.joint_forces.size()); ++i) {
     const JointForce& jf = options_.joint_forces[i];
-    const TreeBody& b = tree_.bodies[i];
+    const TreeBody& b = model_.tree.bodies[i];
     if (!std::isfinite(jf.stiffness) || !std::isfinite(jf.rest) || !std::isfinite(jf.damping) ||
         jf.stiffness < 0.0 || jf.damping < 0.0) {
       throw InputError(w + ": joint '" + b.joint +
@@ -255,7 +267,7 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   }
   for (const Bushing& bu : options_.bushings) {
     for (int body : {bu.parent, bu.child}) {
-      if (body < -1 || body >= nb || (body >= 0 && !is_free_root(tree_.bodies[body])) ||
+      if (body < -1 || body >= nb || (body >= 0 && !is_free_root(model_.tree.bodies[body])) ||
           bu.child < 0) {
         throw InputError(w + ": bushing '" + bu.name + "' must join free bodies");
       }
@@ -267,7 +279,7 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   if (options_.initial_q.size() == 0) {
     options_.initial_q = Eigen::VectorXd::Zero(dims_.nq);
     for (int i = 0; i < nb; ++i) {
-      if (tree_.bodies[i].type == JointType::kFloating) options_.initial_q[q_offset_[i] + 3] = 1.0;
+      if (model_.tree.bodies[i].type == JointType::kFloating) options_.initial_q[model_.q_offset[i] + 3] = 1.0;
     }
   }
   if (options_.initial_v.size() == 0) options_.initial_v = Eigen::VectorXd::Zero(dims_.nv);
@@ -277,118 +289,153 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
                      std::to_string(dims_.nv) + " velocities, all finite");
   }
   for (int i = 0; i < nb; ++i) {
-    if (tree_.bodies[i].type != JointType::kFloating) continue;
-    auto quat = options_.initial_q.segment<4>(q_offset_[i] + 3);
+    if (model_.tree.bodies[i].type != JointType::kFloating) continue;
+    auto quat = options_.initial_q.segment<4>(model_.q_offset[i] + 3);
     if (quat.norm() < 1e-12) {
-      throw InputError(w + ": joint '" + tree_.bodies[i].joint + "': the initial quaternion is zero");
+      throw InputError(w + ": joint '" + model_.tree.bodies[i].joint + "': the initial quaternion is zero");
     }
     quat.normalize();
   }
 
-  // Bodies are related when one lies on the other's path to the root; only
-  // related bodies share entries of M (branch sparsity), and so, through the
-  // Newton-Euler recursion, of K and D. Bushings relate the bodies they join
-  // (and the branches above them).
-  std::vector<std::vector<int>> related(nb);
+  model_.nq = dims_.nq;
+  model_.nv = dims_.nv;
+  model_.world_acceleration.tail<3>() = -options_.gravity;
+  model_.stiffness.assign(nb, 0.0);
+  model_.rest.assign(nb, 0.0);
+  model_.damping.assign(nb, 0.0);
+  constant_mass_ = true;
   for (int i = 0; i < nb; ++i) {
-    for (int j = i; j >= 0; j = tree_.bodies[j].parent) related[i].push_back(j);
+    const TreeBody& b = model_.tree.bodies[i];
+    model_.inertia_matrix.push_back(model_.inertia[i].matrix());
+    // With its linear velocity in the world and its angular velocity in its
+    // own frame, a free body whose origin is its centre of mass has the
+    // constant M = diag(m I, I_c); anything else moves M with q.
+    constant_mass_ &= is_free_root(b) && b.inertia.com.isZero(0.0);
+    if (joint_nv(b.type) != 1) continue;
+    model_.damping[i] = b.damping;
+    if (options_.joint_forces.empty()) continue;
+    model_.damping[i] += options_.joint_forces[i].damping;
+    model_.stiffness[i] = options_.joint_forces[i].stiffness;
+    model_.rest[i] = options_.joint_forces[i].rest;
   }
-  PatternBuilder M(dims_.nv, dims_.nv), K(dims_.nv, dims_.nq), D(dims_.nv, dims_.nv);
-  auto add_block = [&](PatternBuilder& P, int row0, int rows, int col0, int cols) {
-    for (int r = 0; r < rows; ++r)
-      for (int c = 0; c < cols; ++c) P.add(row0 + r, col0 + c);
-  };
-  auto add_pair = [&](int i, int j) {
-    const int ni = joint_nv(tree_.bodies[i].type), nj = joint_nv(tree_.bodies[j].type);
-    for (auto [a, b] : {std::pair{i, j}, std::pair{j, i}}) {
-      const int na = joint_nv(tree_.bodies[a].type);
-      add_block(K, v_offset_[a], na, q_offset_[b], joint_nq(tree_.bodies[b].type));
-      add_block(D, v_offset_[a], na, v_offset_[b], joint_nv(tree_.bodies[b].type));
-    }
-    (void)ni, (void)nj;
-  };
-  for (int i = 0; i < nb; ++i) {
-    for (int j : related[i]) {
-      add_pair(i, j);
-      const int ni = joint_nv(tree_.bodies[i].type), nj = joint_nv(tree_.bodies[j].type);
-      add_block(M, v_offset_[i], ni, v_offset_[j], nj);
-      add_block(M, v_offset_[j], nj, v_offset_[i], ni);
-    }
-  }
-  for (const Bushing& bu : options_.bushings) {
-    if (bu.parent >= 0) add_pair(bu.parent, bu.child);
-    add_pair(bu.child, bu.child);
-  }
-  mass_pattern_ = M.build();
-  jacobian_pattern_ = empty_jacobians(dims_);
-  jacobian_pattern_.dF_dq = K.build();
-  jacobian_pattern_.dF_dv = D.build();
-
-  // The slots of M's entries in the order mass_matrix() writes them.
-  for (int i = 0; i < nb; ++i) {
-    const int ni = joint_nv(tree_.bodies[i].type);
-    for (int j : related[i]) {
-      const int nj = joint_nv(tree_.bodies[j].type);
-      for (int a = 0; a < nj; ++a) {
-        for (int b = 0; b < ni; ++b) {
-          mass_slots_.push_back(slot_of(mass_pattern_, v_offset_[j] + a, v_offset_[i] + b));
-          mass_slots_.push_back(slot_of(mass_pattern_, v_offset_[i] + b, v_offset_[j] + a));
-        }
-      }
-    }
-  }
+  data_ = std::make_unique<ArticulatedData<double>>(model_);
+  acceleration_.resize(dims_.nv);
+  composite_.resize(nb);
+  transform_.resize(nb);
+  subspace_.resize(nb);
 
   PatternBuilder Np(dims_.nq, dims_.nv);
   for (int i = 0; i < nb; ++i) {
-    const int qo = q_offset_[i], vo = v_offset_[i];
-    if (tree_.bodies[i].type == JointType::kFloating) {
+    const int qo = model_.q_offset[i], vo = model_.v_offset[i];
+    if (model_.tree.bodies[i].type == JointType::kFloating) {
       for (int k = 0; k < 3; ++k) Np.add(qo + k, vo + k);
       for (int r = 3; r < 7; ++r)
         for (int c = 3; c < 6; ++c) Np.add(qo + r, vo + c);
     } else {
-      for (int k = 0; k < joint_nv(tree_.bodies[i].type); ++k) Np.add(qo + k, vo + k);
+      for (int k = 0; k < joint_nv(model_.tree.bodies[i].type); ++k) Np.add(qo + k, vo + k);
     }
   }
   velocity_map_pattern_ = Np.build();
 
   // A motion that moves no mass (a massless floating root turning about its
   // child's joint axis, a massless leaf) makes M singular; say so here rather
-  // than fail in the first Newton solve.
-  SparseMatrix M0 = mass_pattern_;
-  mass_matrix(options_.initial_q, &M0);
-  Eigen::SimplicialLDLT<SparseMatrix> ldlt(M0);
-  const double scale = M0.diagonal().cwiseAbs().maxCoeff();
-  if (ldlt.info() != Eigen::Success || ldlt.vectorD().minCoeff() <= 1e-12 * scale) {
+  // than fail in the first Newton solve. The articulated-body pivots are
+  // those of an LDL^T factorization of M: O(n), whatever the tree.
+  ArticulatedBodySolver pivots(model_);
+  if (!pivots.factor(options_.initial_q, 0.0)) {
     throw InputError(w + ": the mass matrix is singular at the initial state: some joint motion moves "
                          "no mass (e.g. a massless floating root turning about its child's joint axis, "
                          "or a massless link at the end of a branch)");
   }
+}
 
-  const long dense = static_cast<long>(dims_.nv) * (dims_.nq + dims_.nv);
-  if (jacobian_pattern_.dF_dq.nonZeros() + jacobian_pattern_.dF_dv.nonZeros() == dense) {
-    // A serial chain in reduced coordinates: every column its own colour,
-    // without the greedy colouring's O(rows cols^2) search.
-    column_colour_.resize(dims_.nq + dims_.nv);
-    for (int j = 0; j < dims_.nq + dims_.nv; ++j) column_colour_[j] = j;
-    colours_ = dims_.nq + dims_.nv;
-  } else {
-    const ColumnColouring colouring = colour_columns(
-        dims_.nv, dims_.nq + dims_.nv,
-        {PatternBlock{&jacobian_pattern_.dF_dq, 0, 0}, PatternBlock{&jacobian_pattern_.dF_dv, 0, dims_.nq}});
-    column_colour_ = colouring.colour;
-    colours_ = colouring.colours;
-  }
-  jacobian_passes_ = (colours_ + kLanes - 1) / kLanes;
+const ArticulatedSystem::Patterns& ArticulatedSystem::patterns() const {
+  std::call_once(patterns_built_, [this] {
+    auto P = std::make_unique<Patterns>();
+    const int nb = model_.bodies();
+    // Bodies are related when one lies on the other's path to the root; only
+    // related bodies share entries of M (branch sparsity), and so, through the
+    // Newton-Euler recursion, of K and D. Bushings relate the bodies they join
+    // (and the branches above them).
+    std::vector<std::vector<int>> related(nb);
+    for (int i = 0; i < nb; ++i) {
+      for (int j = i; j >= 0; j = model_.tree.bodies[j].parent) related[i].push_back(j);
+    }
+    PatternBuilder M(dims_.nv, dims_.nv), K(dims_.nv, dims_.nq), D(dims_.nv, dims_.nv);
+    auto add_block = [&](PatternBuilder& B, int row0, int rows, int col0, int cols) {
+      for (int r = 0; r < rows; ++r)
+        for (int c = 0; c < cols; ++c) B.add(row0 + r, col0 + c);
+    };
+    auto add_pair = [&](int i, int j) {
+      const int ni = joint_nv(model_.tree.bodies[i].type), nj = joint_nv(model_.tree.bodies[j].type);
+      for (auto [a, b] : {std::pair{i, j}, std::pair{j, i}}) {
+        const int na = joint_nv(model_.tree.bodies[a].type);
+        add_block(K, model_.v_offset[a], na, model_.q_offset[b], joint_nq(model_.tree.bodies[b].type));
+        add_block(D, model_.v_offset[a], na, model_.v_offset[b], joint_nv(model_.tree.bodies[b].type));
+      }
+      (void)ni, (void)nj;
+    };
+    for (int i = 0; i < nb; ++i) {
+      for (int j : related[i]) {
+        add_pair(i, j);
+        const int ni = joint_nv(model_.tree.bodies[i].type), nj = joint_nv(model_.tree.bodies[j].type);
+        add_block(M, model_.v_offset[i], ni, model_.v_offset[j], nj);
+        add_block(M, model_.v_offset[j], nj, model_.v_offset[i], ni);
+      }
+    }
+    for (const Bushing& bu : options_.bushings) {
+      if (bu.parent >= 0) add_pair(bu.parent, bu.child);
+      add_pair(bu.child, bu.child);
+    }
+    P->mass = M.build();
+    P->jacobians = empty_jacobians(dims_);
+    P->jacobians.dF_dq = K.build();
+    P->jacobians.dF_dv = D.build();
+
+    // The slots of M's entries in the order mass_matrix() writes them.
+    for (int i = 0; i < nb; ++i) {
+      const int ni = joint_nv(model_.tree.bodies[i].type);
+      for (int j : related[i]) {
+        const int nj = joint_nv(model_.tree.bodies[j].type);
+        for (int a = 0; a < nj; ++a) {
+          for (int b = 0; b < ni; ++b) {
+            P->mass_slots.push_back(slot_of(P->mass, model_.v_offset[j] + a, model_.v_offset[i] + b));
+            P->mass_slots.push_back(slot_of(P->mass, model_.v_offset[i] + b, model_.v_offset[j] + a));
+          }
+        }
+      }
+    }
+
+    const long dense = static_cast<long>(dims_.nv) * (dims_.nq + dims_.nv);
+    if (P->jacobians.dF_dq.nonZeros() + P->jacobians.dF_dv.nonZeros() == dense) {
+      // A serial chain in reduced coordinates: every column its own colour,
+      // without the greedy colouring's O(rows cols^2) search.
+      P->column_colour.resize(dims_.nq + dims_.nv);
+      for (int j = 0; j < dims_.nq + dims_.nv; ++j) P->column_colour[j] = j;
+      P->colours = dims_.nq + dims_.nv;
+    } else {
+      const ColumnColouring colouring = colour_columns(
+          dims_.nv, dims_.nq + dims_.nv,
+          {PatternBlock{&P->jacobians.dF_dq, 0, 0}, PatternBlock{&P->jacobians.dF_dv, 0, dims_.nq}});
+      P->column_colour = colouring.colour;
+      P->colours = colouring.colours;
+    }
+    P->jacobian_passes = (P->colours + kLanes - 1) / kLanes;
+    patterns_ = std::move(P);
+  });
+  return *patterns_;
 }
 
 Capabilities ArticulatedSystem::capabilities() const {
   Capabilities c;
-  c.identity_velocity_map = !has_floating_;
-  c.has_quaternions = has_floating_;
+  c.identity_velocity_map = !model_.has_floating;
+  c.has_quaternions = model_.has_floating;
   c.analytic_jacobians = true;
   c.automatic_jacobians = true;
   c.has_energy = true;
   c.passive = true;
+  c.constant_mass_matrix = constant_mass_;
+  c.momentum_residual = true;
   return c;
 }
 
@@ -401,8 +448,8 @@ State ArticulatedSystem::initial_state() const {
 
 std::vector<std::string> ArticulatedSystem::position_names() const {
   std::vector<std::string> names;
-  for (const TreeBody& b : tree_.bodies) {
-    const std::string base = tree_.name + "/" + b.joint;
+  for (const TreeBody& b : model_.tree.bodies) {
+    const std::string base = model_.tree.name + "/" + b.joint;
     switch (b.type) {
       case JointType::kFloating:
         for (const char* s : {"x", "y", "z", "qw", "qx", "qy", "qz"}) names.push_back(base + "/" + s);
@@ -419,8 +466,8 @@ std::vector<std::string> ArticulatedSystem::position_names() const {
 
 std::vector<std::string> ArticulatedSystem::velocity_names() const {
   std::vector<std::string> names;
-  for (const TreeBody& b : tree_.bodies) {
-    const std::string base = tree_.name + "/" + b.joint;
+  for (const TreeBody& b : model_.tree.bodies) {
+    const std::string base = model_.tree.name + "/" + b.joint;
     switch (b.type) {
       case JointType::kFloating:
         for (const char* s : {"vx", "vy", "vz", "wx", "wy", "wz"}) names.push_back(base + "/" + s);
@@ -437,13 +484,13 @@ std::vector<std::string> ArticulatedSystem::velocity_names() const {
 
 void ArticulatedSystem::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
                                              VectorRef qdot) const {
-  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
-    const int qo = q_offset_[i], vo = v_offset_[i];
-    if (tree_.bodies[i].type == JointType::kFloating) {
+  for (int i = 0; i < static_cast<int>(model_.tree.bodies.size()); ++i) {
+    const int qo = model_.q_offset[i], vo = model_.v_offset[i];
+    if (model_.tree.bodies[i].type == JointType::kFloating) {
       qdot.segment<3>(qo) = v.segment<3>(vo);
       qdot.segment<4>(qo + 3) = quaternion_rate_map(q.segment<4>(qo + 3)) * v.segment<3>(vo + 3);
     } else {
-      const int n = joint_nv(tree_.bodies[i].type);
+      const int n = joint_nv(model_.tree.bodies[i].type);
       qdot.segment(qo, n) = v.segment(vo, n);
     }
   }
@@ -451,24 +498,24 @@ void ArticulatedSystem::map_velocity_to_qdot(const ConstVectorRef& q, const Cons
 
 void ArticulatedSystem::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
   // Column-major storage: fill column by column in the pattern's own order.
-  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
-    const int qo = q_offset_[i], vo = v_offset_[i];
-    if (tree_.bodies[i].type == JointType::kFloating) {
+  for (int i = 0; i < static_cast<int>(model_.tree.bodies.size()); ++i) {
+    const int qo = model_.q_offset[i], vo = model_.v_offset[i];
+    if (model_.tree.bodies[i].type == JointType::kFloating) {
       for (int k = 0; k < 3; ++k) N->coeffRef(qo + k, vo + k) = 1.0;
       const Eigen::Matrix<double, 4, 3> G = quaternion_rate_map(q.segment<4>(qo + 3));
       for (int r = 0; r < 4; ++r)
         for (int c = 0; c < 3; ++c) N->coeffRef(qo + 3 + r, vo + 3 + c) = G(r, c);
     } else {
-      for (int k = 0; k < joint_nv(tree_.bodies[i].type); ++k) N->coeffRef(qo + k, vo + k) = 1.0;
+      for (int k = 0; k < joint_nv(model_.tree.bodies[i].type); ++k) N->coeffRef(qo + k, vo + k) = 1.0;
     }
   }
 }
 
 bool ArticulatedSystem::project_positions(VectorRef q) const {
   bool changed = false;
-  for (int i = 0; i < static_cast<int>(tree_.bodies.size()); ++i) {
-    if (tree_.bodies[i].type != JointType::kFloating) continue;
-    auto quat = q.segment<4>(q_offset_[i] + 3);
+  for (int i = 0; i < static_cast<int>(model_.tree.bodies.size()); ++i) {
+    if (model_.tree.bodies[i].type != JointType::kFloating) continue;
+    auto quat = q.segment<4>(model_.q_offset[i] + 3);
     const double n = quat.norm();
     if (n > 0.0 && n != 1.0) {
       quat /= n;
@@ -482,19 +529,21 @@ void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) co
   // Composite rigid body algorithm: the inertia of every subtree in its root
   // body's frame, then M_ji = S_j^T X^T ... X^T Ic_i S_i along the path from i
   // to the root. Only related pairs are visited: the tree's branch sparsity.
-  const int nb = static_cast<int>(tree_.bodies.size());
-  std::vector<Eigen::Matrix<double, 6, 6>> Ic(nb), X(nb);
-  std::vector<MotionSubspace<double>> S(nb);
+  const int nb = model_.bodies();
+  const std::vector<int>& slots = patterns().mass_slots;
+  std::vector<Eigen::Matrix<double, 6, 6>>& Ic = composite_;
+  std::vector<Eigen::Matrix<double, 6, 6>>& X = transform_;
+  std::vector<MotionSubspace<double>>& S = subspace_;
   for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree_.bodies[i];
-    const JointMotion<double> jm = joint_motion<double>(b, q.segment(q_offset_[i], joint_nq(b.type)));
+    const TreeBody& b = model_.tree.bodies[i];
+    const JointMotion<double> jm = joint_motion<double>(b, q.segment(model_.q_offset[i], joint_nq(b.type)));
     S[i] = jm.S;
     X[i] = motion_transform_matrix(jm.pose);
-    Ic[i] = inertia_[i].matrix();
+    Ic[i] = model_.inertia_matrix[i];
   }
   for (int i = nb - 1; i >= 0; --i) {
-    const int p = tree_.bodies[i].parent;
-    if (p >= 0) Ic[p] += X[i].transpose() * Ic[i] * X[i];
+    const int p = model_.tree.bodies[i].parent;
+    if (p >= 0) Ic[p].noalias() += X[i].transpose() * Ic[i] * X[i];
   }
   double* values = M->valuePtr();
   std::size_t slot = 0;
@@ -505,15 +554,25 @@ void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) co
       const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6> block = S[j].transpose() * Fm;
       for (int a = 0; a < block.rows(); ++a) {
         for (int b = 0; b < block.cols(); ++b) {
-          values[mass_slots_[slot++]] = block(a, b);
-          values[mass_slots_[slot++]] = block(a, b);
+          values[slots[slot++]] = block(a, b);
+          values[slots[slot++]] = block(a, b);
         }
       }
-      const int p = tree_.bodies[j].parent;
+      const int p = model_.tree.bodies[j].parent;
       if (p < 0) break;
       Fm = X[j].transpose() * Fm;
       j = p;
     }
+  }
+}
+
+template <typename T, typename Positions, typename Velocities>
+void ArticulatedSystem::generalized_forces(const Positions& q, const Velocities& v,
+                                           const double* acceleration,
+                                           ArticulatedData<T>* data) const {
+  inverse_dynamics<T>(model_, q, v, acceleration, data);
+  for (const Bushing& bu : options_.bushings) {
+    add_bushing_forces<T>(bu, q, v, model_.q_offset, model_.v_offset, &data->F);
   }
 }
 
@@ -522,62 +581,38 @@ void ArticulatedSystem::evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1
                                         const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
                                         Eigen::Matrix<T, Eigen::Dynamic, 1>* F,
                                         const double* acceleration) const {
-  // Recursive Newton-Euler: tau = M(q) a + C(q, v) + g(q) (gravity as an
-  // upward acceleration of the world), F = -tau + joint forces; a = 0 unless
-  // `acceleration` is given (then F - M a, for JacobianRequest::acceleration).
-  const int nb = static_cast<int>(tree_.bodies.size());
-  std::vector<Pose<T>> pose(nb);
-  std::vector<MotionSubspace<T>> S(nb);
-  std::vector<Vec6<T>> V(nb), A(nb), f(nb);
-  Vec6<T> a_world;
-  a_world << T(0.0), T(0.0), T(0.0), T(-options_.gravity.x()), T(-options_.gravity.y()),
-      T(-options_.gravity.z());
-  for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree_.bodies[i];
-    const int nv = joint_nv(b.type);
-    const JointMotion<T> jm = joint_motion<T>(b, q.segment(q_offset_[i], joint_nq(b.type)));
-    pose[i] = jm.pose;
-    S[i] = jm.S;
-    const Vec6<T> vJ = jm.S * v.segment(v_offset_[i], nv);
-    Vec6<T> cJ = joint_velocity_product<T>(vJ);
-    if (acceleration) {
-      const Eigen::Map<const Eigen::VectorXd> a(acceleration + v_offset_[i], nv);
-      cJ += jm.S * a.cast<T>();
-    }
-    if (b.parent < 0) {
-      V[i] = vJ;
-      A[i] = motion_to_child<T>(pose[i], a_world) + cJ;
-    } else {
-      V[i] = motion_to_child<T>(pose[i], V[b.parent]) + vJ;
-      A[i] = motion_to_child<T>(pose[i], A[b.parent]) + cJ + cross_motion<T>(V[i], vJ);
-    }
-    f[i] = inertia_[i].apply<T>(A[i]) + cross_force<T>(V[i], inertia_[i].apply<T>(V[i]));
+  if constexpr (std::is_same_v<T, double>) {
+    generalized_forces<double>(q, v, acceleration, data_.get());
+    *F = data_->F;
+  } else {
+    ArticulatedData<T> data(model_);
+    generalized_forces<T>(q, v, acceleration, &data);
+    *F = data.F;
   }
-  F->resize(dims_.nv);
-  for (int i = nb - 1; i >= 0; --i) {
-    const TreeBody& b = tree_.bodies[i];
-    const int nv = joint_nv(b.type);
-    F->segment(v_offset_[i], nv) = -(S[i].transpose() * f[i]);
-    if (b.parent >= 0) f[b.parent] += force_to_parent<T>(pose[i], f[i]);
-    if (nv == 1) {
-      const double damping = b.damping + (options_.joint_forces.empty() ? 0.0 : options_.joint_forces[i].damping);
-      T& Fi = (*F)[v_offset_[i]];
-      Fi -= T(damping) * v[v_offset_[i]];
-      if (!options_.joint_forces.empty() && options_.joint_forces[i].stiffness != 0.0) {
-        const JointForce& jf = options_.joint_forces[i];
-        Fi -= T(jf.stiffness) * (q[q_offset_[i]] - T(jf.rest));
-      }
-    }
-  }
-  for (const Bushing& bu : options_.bushings) add_bushing_forces<T>(bu, q, v, q_offset_, v_offset_, F);
 }
 
 void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                const ConstVectorRef& z, VectorRef F) const {
   (void)t, (void)z;
-  Eigen::VectorXd out;
-  evaluate_forces<double>(q, v, &out, nullptr);
-  F = out;
+  generalized_forces<double>(q, v, nullptr, data_.get());
+  F = data_->F;
+}
+
+void ArticulatedSystem::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                          const ConstVectorRef& z, const ConstVectorRef& dv,
+                                          double h, VectorRef r) const {
+  // F - M(q) a at a = dv / h is -(M dv - h F) / h.
+  (void)t, (void)z;
+  acceleration_ = dv / h;
+  generalized_forces<double>(q, v, acceleration_.data(), data_.get());
+  r = -h * data_->F;
+}
+
+std::unique_ptr<StructuredNewtonMatrix> ArticulatedSystem::make_structured_newton_matrix() const {
+  // Bushings couple free bodies through stiffness the recursion cannot fold
+  // into joint-space pivots; their systems assemble the sparse matrix.
+  if (!options_.bushings.empty()) return nullptr;
+  return std::make_unique<ArticulatedBodySolver>(model_);
 }
 
 void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v,
@@ -585,23 +620,28 @@ void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVect
   // Seeded forward mode: the columns of one colour share no row of [K D], so
   // they can share a derivative lane; each pass carries kLanes colours.
   const int nq = dims_.nq, nv = dims_.nv;
-  VecX<Dual> qd(nq), vd(nv), Fd;
+  const Patterns& P = patterns();
+  if (!dual_) dual_ = std::make_unique<DualWorkspace>(model_);
+  VecX<Dual>& qd = dual_->q;
+  VecX<Dual>& vd = dual_->v;
+  ArticulatedData<Dual>& data = dual_->data;
+  const VecX<Dual>& Fd = data.F;
   SparseMatrix& K = J->dF_dq;
   SparseMatrix& D = J->dF_dv;
-  for (int pass = 0; pass < jacobian_passes_; ++pass) {
+  for (int pass = 0; pass < P.jacobian_passes; ++pass) {
     const int first = pass * kLanes;
     auto seed = [&](int column, double value, Dual* x) {
       *x = Dual(value);
       x->derivatives().setZero();
-      const int lane = column_colour_[column] - first;
-      if (column_colour_[column] >= 0 && lane >= 0 && lane < kLanes) x->derivatives()[lane] = 1.0;
+      const int lane = P.column_colour[column] - first;
+      if (P.column_colour[column] >= 0 && lane >= 0 && lane < kLanes) x->derivatives()[lane] = 1.0;
     };
     for (int j = 0; j < nq; ++j) seed(j, q[j], &qd[j]);
     for (int j = 0; j < nv; ++j) seed(nq + j, v[j], &vd[j]);
-    evaluate_forces<Dual>(qd, vd, &Fd, acceleration);
+    generalized_forces<Dual>(qd, vd, acceleration, &data);
     auto store = [&](SparseMatrix& A, int column_offset) {
       for (int j = 0; j < A.outerSize(); ++j) {
-        const int lane = column_colour_[column_offset + j] - first;
+        const int lane = P.column_colour[column_offset + j] - first;
         if (lane < 0 || lane >= kLanes) continue;
         for (SparseMatrix::InnerIterator it(A, j); it; ++it) {
           it.valueRef() = Fd[it.row()].derivatives()[lane];
@@ -651,7 +691,7 @@ void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const E
 
 std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
   std::vector<Pose<double>> world;
-  forward_kinematics(tree_, q, nullptr, &world, nullptr);
+  forward_kinematics(model_.tree, q, nullptr, &world, nullptr);
   return world;
 }
 
@@ -659,7 +699,7 @@ std::vector<Vec6<double>> ArticulatedSystem::body_velocities(const Eigen::Vector
                                                              const Eigen::VectorXd& v) const {
   std::vector<Pose<double>> world;
   std::vector<Vec6<double>> V;
-  forward_kinematics(tree_, q, &v, &world, &V);
+  forward_kinematics(model_.tree, q, &v, &world, &V);
   return V;
 }
 
@@ -668,7 +708,7 @@ Vec6<double> ArticulatedSystem::world_momentum(const Eigen::VectorXd& q, const E
   const std::vector<Vec6<double>> V = body_velocities(q, v);
   Vec6<double> total = Vec6<double>::Zero();
   for (int i = 0; i < static_cast<int>(world.size()); ++i) {
-    total += force_to_parent<double>(world[i], inertia_[i].apply<double>(V[i]));
+    total += force_to_parent<double>(world[i], model_.inertia[i].apply<double>(V[i]));
   }
   return total;
 }
@@ -676,7 +716,7 @@ Vec6<double> ArticulatedSystem::world_momentum(const Eigen::VectorXd& q, const E
 double ArticulatedSystem::kinetic_energy(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const {
   const std::vector<Vec6<double>> V = body_velocities(q, v);
   double e = 0.0;
-  for (int i = 0; i < static_cast<int>(V.size()); ++i) e += 0.5 * V[i].dot(inertia_[i].apply<double>(V[i]));
+  for (int i = 0; i < static_cast<int>(V.size()); ++i) e += 0.5 * V[i].dot(model_.inertia[i].apply<double>(V[i]));
   return e;
 }
 
@@ -685,22 +725,22 @@ double ArticulatedSystem::energy(const State& s) const {
   double e = kinetic_energy(q, v);
   const std::vector<Pose<double>> world = world_poses(q);
   for (int i = 0; i < static_cast<int>(world.size()); ++i) {
-    e -= inertia_[i].mass * options_.gravity.dot(world[i].R * inertia_[i].com + world[i].p);
+    e -= model_.inertia[i].mass * options_.gravity.dot(world[i].R * model_.inertia[i].com + world[i].p);
   }
   for (int i = 0; i < static_cast<int>(options_.joint_forces.size()); ++i) {
     const JointForce& jf = options_.joint_forces[i];
-    if (joint_nv(tree_.bodies[i].type) != 1 || jf.stiffness == 0.0) continue;
-    const double dq = q[q_offset_[i]] - jf.rest;
+    if (joint_nv(model_.tree.bodies[i].type) != 1 || jf.stiffness == 0.0) continue;
+    const double dq = q[model_.q_offset[i]] - jf.rest;
     e += 0.5 * jf.stiffness * dq * dq;
   }
-  for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, q_offset_, v_offset_);
+  for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, model_.q_offset, model_.v_offset);
   return e;
 }
 
 double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) const {
   const Bushing& bu = options_.bushings.at(k);
   const Eigen::VectorXd v = Eigen::VectorXd::Zero(dims_.nv);
-  const BushingFrames<double> fr = bushing_frames<double>(bu, q, v, q_offset_, v_offset_);
+  const BushingFrames<double> fr = bushing_frames<double>(bu, q, v, model_.q_offset, model_.v_offset);
   if (bu.type == JointType::kPrismatic) return fr.n.dot(fr.b.pose.p - fr.xJ);
   return bushing_angle<double>(bu, fr, nullptr);
 }

@@ -12,6 +12,7 @@
 #include "stiffsim/integrators/jacobian_evaluator.h"
 #include "stiffsim/linalg/gmres.h"
 #include "stiffsim/linalg/linear_solver.h"
+#include "stiffsim/structured_newton_matrix.h"
 
 namespace stiffsim {
 
@@ -40,8 +41,13 @@ enum class NewtonSolve {
   kChord,   // the reuse ladder: the last factorization is the Newton matrix
   kKrylov,  // CG on the current Newton matrix, preconditioned by the last factorization
   kFresh,   // a fresh Jacobian and factorization every iteration (full Newton)
+  // The system's structured Newton matrix (structured_newton_matrix.h: an
+  // exact tree's articulated-body recursion, O(n)) factored at every
+  // iterate, with the exact residual; kAuto takes it for VIE on trees of
+  // at least kRecursiveMinDofs velocities.
+  kRecursive,
 };
-NewtonSolve parse_newton_solve(const std::string& name);  // "auto" | "chord" | "krylov" | "fresh"
+NewtonSolve parse_newton_solve(const std::string& name);  // "auto" | ... | "recursive"
 std::string to_string(NewtonSolve solve);
 
 ImplicitErrorEstimate parse_error_estimator(const std::string& name);  // "trapezoid" | "doubling"
@@ -100,6 +106,19 @@ class ImplicitIntegrator : public IntegratorBase {
   // step_doubling()).
   double newton_tolerance() const { return newton_tolerance_; }
   bool reuse_enabled() const { return implicit_.reuse && !implicit_.full_newton; }
+  // Takes the system's structured Newton matrix when the settings ask for
+  // it (or, under kAuto, when the system has one and `auto_allowed`); the
+  // method calls it from its constructor. Throws InputError when
+  // kRecursive is asked for and the method or system cannot do it.
+  void choose_structured_newton_matrix(bool method_allows, const std::string& why_not);
+  bool structured() const { return structured_ != nullptr; }
+  // Below this many velocities an assembled dense matrix costs no more
+  // than the recursion and converges in fewer iterations (chain10: see
+  // README, "How a Newton iteration solves").
+  static constexpr int kRecursiveMinDofs = 16;
+  // The assembled matrices' patterns into jacobians_ (not needed, and not
+  // built, on the structured path).
+  void load_jacobian_patterns() { jacobians_ = system_.jacobian_pattern(); }
 
   // Sizes the shared Newton workspaces for `unknowns` Newton unknowns
   // (nv + nz for VIE, nx for IE); subclasses call it from do_initialize().
@@ -289,6 +308,18 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr double kStartCostDecay = 0.9;
   static constexpr int kStartExploration = 16;
   int choose_start();
+  // The structured path's rung: the recursion at every iterate.
+  static constexpr int kStructuredTrial = 6;
+  // Factors the structured matrix at the iterate x, timed and counted.
+  bool factor_structured(const Eigen::VectorXd& x, double h);
+  // The structured path's Newton direction at the iterate x (residual -rhs):
+  // GMRES on the exact Jacobian, applied matrix-free by a difference of
+  // residuals, preconditioned by the structured matrix factored at x.
+  void structured_direction(double tf, double h, const Eigen::VectorXd& x0,
+                            const Eigen::VectorXd& x, const Eigen::VectorXd& rhs, double forcing,
+                            Eigen::VectorXd* dy);
+  Eigen::VectorXd x_product_, r_product_;
+  std::unique_ptr<StructuredNewtonMatrix> structured_;
   // A factorization formed for a step more than this factor away from the
   // current one is refactored before its first use (refresh_matrices).
   static constexpr double kReuseStepRatio = 4.0;

@@ -103,7 +103,8 @@ class IntegratorBase {
   // Evaluates F (and f_z) into the given vectors, counting and timing it.
   void evaluate_forces(double t, const Eigen::VectorXd& x, Eigen::VectorXd* F,
                        Eigen::VectorXd* zdot);
-  // Assembles M(q) into mass_matrix_ unless M is constant and already there.
+  // Assembles M(q) into mass_matrix_ unless M is constant and already
+  // there, or was assembled at this very q.
   const SparseMatrix& mass_matrix_at(const ConstVectorRef& q);
   // Solves M(q) a = F (a division for a diagonal M, otherwise a factorization
   // kept until M changes). t only names the time if M is singular. a may not
@@ -134,6 +135,7 @@ class IntegratorBase {
   void check_energy_blow_up(double t, double h);
 
   SparseMatrix mass_matrix_;
+  Eigen::VectorXd mass_q_;  // where mass_matrix_ was assembled
   bool mass_matrix_valid_ = false;
   std::unique_ptr<LinearSolver> mass_solver_;  // for M^-1 F when M is not diagonal
   bool mass_solver_factored_ = false;

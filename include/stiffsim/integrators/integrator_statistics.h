@@ -65,6 +65,10 @@ struct IntegratorStatistics {
   long factorizations_first = 0;          // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;     // CG time since the last one exceeded a factorization's
   long factorizations_krylov_failed = 0;  // a CG solve missed its tolerance
+  // Newton matrices factored by the system's own structure (the
+  // articulated-body recursion, O(n)), one per Newton iteration; not in
+  // iteration_matrix_factorizations, which counts assembled matrices.
+  long recursive_factorizations = 0;
 
   // Wall time split, seconds.
   double jacobian_seconds = 0.0;

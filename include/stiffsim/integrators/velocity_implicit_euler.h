@@ -78,6 +78,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   std::vector<int> identity_slots_;  // diagonal of the z (or generic) block
   SparseMatrix N_;                   // N(q_k) when N != I
   SparseMatrix KN_, ZqN_;
+  std::vector<int> product_marker_;  // multiply_into_pattern()'s scratch
   Eigen::VectorXd residual_state_, qdot_, F_, zdot_;  // residual_state_: (q_n + h N v, v, z)
 };
 

@@ -44,6 +44,12 @@ std::vector<int> slots_in(const SparseMatrix& whole, const SparseMatrix& part, i
 void scatter_add(const SparseMatrix& part, const std::vector<int>& slots, double scale,
                  SparseMatrix* whole);
 
+// C = A B into C's existing pattern, which must hold the structural product
+// (every position A B can reach); allocation-free once `marker` has
+// A.rows() entries (the scratch that maps a row of C's column to its slot).
+void multiply_into_pattern(const SparseMatrix& A, const SparseMatrix& B, SparseMatrix* C,
+                           std::vector<int>* marker);
+
 // True when A has the same pattern as its transpose (values not compared).
 bool is_structurally_symmetric(const SparseMatrix& A);
 

@@ -14,11 +14,16 @@
 // whatever its length, and a dense exact tree about (nq + nv) / 16 passes.
 
 #include <Eigen/Core>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
+#include "stiffsim/model/articulated_data.h"
+#include "stiffsim/model/articulated_model.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
+#include "stiffsim/structured_newton_matrix.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
@@ -75,6 +80,11 @@ struct ArticulatedOptions {
 void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
                         std::vector<Pose<double>>* world, std::vector<Vec6<double>>* velocities);
 
+// The model (ArticulatedModel) is immutable; every evaluation writes into one
+// workspace (ArticulatedData) created with the system, so evaluations
+// allocate nothing and a system serves one thread at a time. The matrix
+// patterns (dense for a long chain) are built on first use: a run on the
+// articulated-body recursion never needs them.
 class ArticulatedSystem : public System {
  public:
   // Validates the tree and options; throws InputError naming the component.
@@ -82,7 +92,7 @@ class ArticulatedSystem : public System {
 
   Dimensions dimensions() const override { return dims_; }
   Capabilities capabilities() const override;
-  std::string name() const override { return tree_.name; }
+  std::string name() const override { return model_.tree.name; }
   State initial_state() const override;
   std::vector<std::string> position_names() const override;
   std::vector<std::string> velocity_names() const override;
@@ -93,11 +103,17 @@ class ArticulatedSystem : public System {
   void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const override;
   bool project_positions(VectorRef q) const override;
 
-  const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
+  const SparseMatrix& mass_matrix_pattern() const override { return patterns().mass; }
   void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
   void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
               VectorRef F) const override;
-  const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
+  // M(q) dv - h F by one inverse-dynamics pass at the acceleration dv / h.
+  void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                         const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                         VectorRef r) const override;
+  // Exact trees (no bushings): the articulated-body recursion.
+  std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const override;
+  const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
   // Exact K and D (complete: nothing dropped; request.acceleration honoured),
   // by the same
   // seeded forward-mode differentiation as automatic_force_jacobians.
@@ -110,10 +126,11 @@ class ArticulatedSystem : public System {
   double energy(const State& s) const override;
 
   // --- For reports and tests. ---
-  const RigidTree& tree() const { return tree_; }
+  const RigidTree& tree() const { return model_.tree; }
+  const ArticulatedModel& model() const { return model_; }
   const ArticulatedOptions& options() const { return options_; }
-  int body_q_offset(int body) const { return q_offset_[body]; }
-  int body_v_offset(int body) const { return v_offset_[body]; }
+  int body_q_offset(int body) const { return model_.q_offset[body]; }
+  int body_v_offset(int body) const { return model_.v_offset[body]; }
   // Poses of every body in the world.
   std::vector<Pose<double>> world_poses(const Eigen::VectorXd& q) const;
   // Spatial velocity of every body in its own coordinates.
@@ -128,7 +145,7 @@ class ArticulatedSystem : public System {
   // joint spring sees it).
   double bushing_coordinate(int k, const Eigen::VectorXd& q) const;
   // Passes of F per Jacobian (colours / lanes, rounded up).
-  int jacobian_passes() const { return jacobian_passes_; }
+  int jacobian_passes() const { return patterns().jacobian_passes; }
 
   // F(q, v), or F - M(q) a with joint accelerations `acceleration` (nv
   // values) when it is not null.
@@ -138,22 +155,44 @@ class ArticulatedSystem : public System {
                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F, const double* acceleration) const;
 
  private:
+  // F (or F - M a) into data->F: the inverse dynamics and the bushings.
+  template <typename T, typename Positions, typename Velocities>
+  void generalized_forces(const Positions& q, const Velocities& v, const double* acceleration,
+                          ArticulatedData<T>* data) const;
   void exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration,
                        ForceJacobians* J) const;
 
-  RigidTree tree_;
+  struct Patterns {
+    SparseMatrix mass;
+    ForceJacobians jacobians;
+    // Value slots of M in the order the composite rigid body algorithm
+    // produces its blocks (see mass_matrix()).
+    std::vector<int> mass_slots;
+    std::vector<int> column_colour;  // over (q, v)
+    int colours = 0, jacobian_passes = 0;
+  };
+  const Patterns& patterns() const;
+
+  ArticulatedModel model_;
   ArticulatedOptions options_;
   Dimensions dims_;
-  std::vector<int> q_offset_, v_offset_;
-  std::vector<SpatialInertia> inertia_;
-  bool has_floating_ = false;
-  SparseMatrix mass_pattern_, velocity_map_pattern_;
-  // Value slots of M in the order the composite rigid body algorithm
-  // produces its blocks (see mass_matrix()).
-  std::vector<int> mass_slots_;
-  ForceJacobians jacobian_pattern_;
-  std::vector<int> column_colour_;  // over (q, v)
-  int colours_ = 0, jacobian_passes_ = 0;
+  SparseMatrix velocity_map_pattern_;
+  bool constant_mass_ = false;
+  mutable std::once_flag patterns_built_;
+  mutable std::unique_ptr<Patterns> patterns_;
+  // Workspaces: inverse dynamics, its acceleration argument, and the
+  // composite rigid body algorithm's subtree inertias and transforms.
+  mutable std::unique_ptr<ArticulatedData<double>> data_;
+  mutable Eigen::VectorXd acceleration_;
+  mutable std::vector<Eigen::Matrix<double, 6, 6>> composite_, transform_;
+  mutable std::vector<MotionSubspace<double>> subspace_;
+  // The automatic differentiation's own workspace (dual numbers), made on
+  // its first use.
+  struct DualWorkspace;
+  mutable std::unique_ptr<DualWorkspace> dual_;
+
+ public:
+  ~ArticulatedSystem() override;
 };
 
 }  // namespace stiffsim

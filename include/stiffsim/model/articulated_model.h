@@ -1,0 +1,34 @@
+#pragma once
+// The immutable description of an exact (reduced-coordinate) articulated
+// tree that the recursive algorithms read: the tree, each body's spatial
+// inertia, where its joint's coordinates sit in q and v, gravity and the
+// joint-space springs and dampers. Every evaluation writes into a separate
+// workspace (ArticulatedData, articulated_data.h), created once; the model
+// never changes after construction (the split of a model and its data, as in
+// MuJoCo's mjModel/mjData and Pinocchio's Model/Data).
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "stiffsim/model/rigid_tree.h"
+#include "stiffsim/model/spatial.h"
+
+namespace stiffsim {
+
+struct ArticulatedModel {
+  RigidTree tree;
+  std::vector<SpatialInertia> inertia;                      // per body, in its own frame
+  std::vector<Eigen::Matrix<double, 6, 6>> inertia_matrix;  // the same as 6x6 matrices
+  std::vector<int> q_offset, v_offset;                      // of each body's joint coordinates
+  int nq = 0, nv = 0;
+  // Gravity as an upward acceleration of the world (angular part first).
+  Vec6<double> world_acceleration = Vec6<double>::Zero();
+  // Per body; nonzero only on 1-DOF joints: tau = -stiffness (q - rest)
+  // - damping q_dot, damping being the URDF's plus the scene's.
+  std::vector<double> stiffness, rest, damping;
+  bool has_floating = false;
+
+  int bodies() const { return static_cast<int>(tree.bodies.size()); }
+};
+
+}  // namespace stiffsim
