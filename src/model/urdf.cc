@@ -190,6 +190,8 @@ struct Ignored {
   int materials = 0;            // top-level <material>
   int transmissions = 0;
   int gazebo = 0;
+  // Joints with each element that is not simulated.
+  int limits = 0, mimic = 0, safety = 0, calibration = 0;
   std::set<std::string> other;  // any other element under <robot> or <link>
 };
 
@@ -245,11 +247,52 @@ void check_tree_shape(const std::vector<XmlJoint>& joints, const std::string& so
   }
 }
 
+// Removes from a joint what is not simulated: limits, mimic, safety
+// controllers and calibration. urdfdom would fail the whole file over one of
+// them malformed, or over a revolute or prismatic joint without a <limit> or
+// with one that lacks effort or velocity, all of which Drake and MuJoCo
+// accept. Such a joint gets a neutral limit instead, only so that urdfdom
+// reads it; the note counts the joints that had their own.
+void strip_joint(TiXmlElement* joint, Ignored* ignored) {
+  bool limit = false, mimic = false, safety = false, calibration = false;
+  std::vector<TiXmlNode*> drop;
+  for (TiXmlElement* c = joint->FirstChildElement(); c; c = c->NextSiblingElement()) {
+    const std::string tag = c->ValueStr();
+    if (tag == "limit") {
+      limit = true;
+    } else if (tag == "mimic") {
+      mimic = true;
+    } else if (tag == "safety_controller") {
+      safety = true;
+    } else if (tag == "calibration") {
+      calibration = true;
+    } else {
+      continue;
+    }
+    drop.push_back(c);
+  }
+  for (TiXmlNode* c : drop) joint->RemoveChild(c);
+  ignored->limits += limit;
+  ignored->mimic += mimic;
+  ignored->safety += safety;
+  ignored->calibration += calibration;
+  const std::string type = attribute(joint, "type");
+  if (type == "revolute" || type == "prismatic") {
+    TiXmlElement neutral("limit");
+    neutral.SetAttribute("effort", "0");
+    neutral.SetAttribute("velocity", "0");
+    neutral.SetAttribute("lower", "0");
+    neutral.SetAttribute("upper", "0");
+    joint->InsertEndChild(neutral);
+  }
+}
+
 // Removes from <robot> everything but links and joints, and from links
 // everything but the inertial: geometry, materials, transmissions and gazebo
 // blocks do not change the dynamics, and urdfdom would fail the whole file
-// over a malformed mesh element or an undefined material in them. Returns the
-// joints in file order (urdfdom keeps them in a map, sorted by name).
+// over a malformed mesh element or an undefined material in them (joints:
+// strip_joint). Returns the joints in file order (urdfdom keeps them in a
+// map, sorted by name).
 std::vector<XmlJoint> strip(TiXmlElement* robot, Ignored* ignored) {
   std::vector<XmlJoint> joints;
   std::vector<TiXmlNode*> drop;
@@ -276,6 +319,7 @@ std::vector<XmlJoint> strip(TiXmlElement* robot, Ignored* ignored) {
       joint.parent = attribute(e->FirstChildElement("parent"), "link");
       joint.child = attribute(e->FirstChildElement("child"), "link");
       joints.push_back(joint);
+      strip_joint(e, ignored);
     } else {
       if (tag == "material") {
         ++ignored->materials;
@@ -350,21 +394,18 @@ RigidInertia link_inertia(const urdf::Link& link, const std::string& source) {
 // The ignored-features note: one line, only what the file actually has.
 std::string ignored_note(const urdf::ModelInterface& model, const Ignored& ignored,
                          const std::string& source) {
-  int limits = 0, mimic = 0, friction = 0, safety = 0, calibration = 0;
+  int friction = 0;
   for (const auto& entry : model.joints_) {
     const urdf::Joint& joint = *entry.second;
-    limits += joint.limits != nullptr;
-    mimic += joint.mimic != nullptr;
     friction += joint.dynamics && joint.dynamics->friction != 0.0;
-    safety += joint.safety != nullptr;
-    calibration += joint.calibration != nullptr;
   }
+  auto joints = [](int n) { return count(n, "joint", "joints"); };
   std::vector<std::string> parts;
-  if (limits) parts.push_back("joint limits (" + count(limits, "joint", "joints") + ")");
-  if (mimic) parts.push_back("mimic (" + count(mimic, "joint", "joints") + ")");
-  if (friction) parts.push_back("friction (" + count(friction, "joint", "joints") + ")");
-  if (safety) parts.push_back("safety controllers (" + count(safety, "joint", "joints") + ")");
-  if (calibration) parts.push_back("calibration (" + count(calibration, "joint", "joints") + ")");
+  if (ignored.limits) parts.push_back("joint limits (" + joints(ignored.limits) + ")");
+  if (ignored.mimic) parts.push_back("mimic (" + joints(ignored.mimic) + ")");
+  if (friction) parts.push_back("friction (" + joints(friction) + ")");
+  if (ignored.safety) parts.push_back("safety controllers (" + joints(ignored.safety) + ")");
+  if (ignored.calibration) parts.push_back("calibration (" + joints(ignored.calibration) + ")");
   if (ignored.links_with_geometry) {
     parts.push_back("visual/collision geometry (" +
                     count(ignored.links_with_geometry, "link", "links") + ")");

@@ -396,6 +396,50 @@ TEST(Urdf, RotatedInertialFrame) {
               1e-15, "inertia in the link frame");
 }
 
+// --- what Drake and MuJoCo accept -------------------------------------------
+
+// urdfdom requires a <limit> with effort and velocity on revolute and
+// prismatic joints; limits are not simulated here, and Drake and MuJoCo take
+// such joints as unlimited.
+TEST(UrdfLenient, RevoluteAndPrismaticJointsNeedNoLimit) {
+  std::vector<std::string> notes;
+  const RigidTree tree = parse(
+      robot("<link name='base'/>" + joint("r", "revolute", "base", "a", "<axis xyz='0 1 0'/>") +
+            link("a") + joint("p", "prismatic", "a", "b", "<axis xyz='0 0 1'/>") + link("b") +
+            joint("half", "revolute", "b", "c", "<limit lower='-1' upper='1'/>") + link("c")),
+      &notes);
+  ASSERT_EQ(tree.bodies.size(), 3u);
+  EXPECT_EQ(tree.bodies[0].type, JointType::kRevolute);
+  expect_near(tree.bodies[0].axis, Eigen::Vector3d::UnitY(), 0.0, "revolute axis");
+  EXPECT_EQ(tree.bodies[1].type, JointType::kPrismatic);
+  expect_near(tree.bodies[1].axis, Eigen::Vector3d::UnitZ(), 0.0, "prismatic axis");
+  EXPECT_EQ(tree.bodies[2].type, JointType::kRevolute);
+  // Only the limit the file wrote is reported as ignored, not the ones the
+  // loader put in for urdfdom.
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_EQ(notes[0],
+            "test.urdf: ignored (no effect on the dynamics here): joint limits (1 joint)");
+}
+
+// The rest of what joints carry that is not simulated cannot fail the file
+// either: urdfdom rejects a mimic without a joint and a safety controller
+// without k_velocity.
+TEST(UrdfLenient, MalformedMimicAndSafetyControllerAreIgnored) {
+  std::vector<std::string> notes;
+  const RigidTree tree =
+      parse(robot("<link name='base'/>" +
+                  joint("j", "continuous", "base", "a",
+                        "<mimic multiplier='2'/><safety_controller k_position='1'/><calibration "
+                        "rising='0.1'/>") +
+                  link("a")),
+            &notes);
+  ASSERT_EQ(tree.bodies.size(), 1u);
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_EQ(notes[0],
+            "test.urdf: ignored (no effect on the dynamics here): mimic (1 joint), safety "
+            "controllers (1 joint), calibration (1 joint)");
+}
+
 // --- the note and urdfdom's own output --------------------------------------
 
 TEST(Urdf, NothingIgnoredMeansNoNote) {
@@ -499,8 +543,6 @@ TEST(Urdf, RejectsWithOneLineNamingTheElement) {
        robot(base + link("a") +
              joint("j", "continuous", "base", "a", "<dynamics damping='-1'/>")),
        "test.urdf: joint 'j': damping is -1; expected a finite value >= 0"},
-      {"revolute without limit", robot(base + link("a") + joint("j", "revolute", "base", "a")),
-       "Joint [j] is of type REVOLUTE but it does not specify limits"},
       {"two parents",
        robot(base + link("a") + link("b") + joint("j1", "continuous", "base", "a") +
              joint("j2", "continuous", "a", "b") + joint("j3", "continuous", "b", "a")),

@@ -4,7 +4,10 @@
 // damping. Fixed joints weld their child into the parent exactly (mass, COM
 // and inertia combined). What does not affect the dynamics (visual and
 // collision geometry, materials, transmissions, gazebo blocks, joint limits,
-// mimic joints, friction) is ignored and said once per file in `notes`.
+// mimic joints, safety controllers, calibration, friction) is ignored and
+// said once per file in `notes`; being ignored, it is never an error
+// either, so revolute and prismatic joints need no <limit> (as in Drake and
+// MuJoCo; urdfdom alone would require one).
 
 #include <string>
 #include <vector>
