@@ -355,7 +355,24 @@ Eigen::Isometry3d to_isometry(const urdf::Pose& pose, const std::string& source,
   return out;
 }
 
-// The link's mass properties in its own frame, checked.
+// Principal moments of an inertia tensor, ascending, and how messages quote
+// them.
+Eigen::Vector3d principal_moments(const Eigen::Matrix3d& tensor) {
+  return Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(tensor, Eigen::EigenvaluesOnly)
+      .eigenvalues();
+}
+
+std::string eigenvalues_text(const Eigen::Vector3d& moments) {
+  return "eigenvalues " + number(moments(0)) + ", " + number(moments(1)) + ", " +
+         number(moments(2));
+}
+
+// The link's mass properties in its own frame, checked for what every link
+// needs: a finite mass >= 0 and a tensor about the COM that is positive
+// semidefinite (a point mass has all-zero moments). Whether a body that moves
+// has enough inertia is decided on the body with its welded links
+// (check_moving_inertia), not here: welded into its parent, a point mass is
+// physically fine.
 RigidInertia link_inertia(const urdf::Link& link, const std::string& source) {
   RigidInertia out;
   if (!link.inertial) return out;
@@ -370,25 +387,51 @@ RigidInertia link_inertia(const urdf::Link& link, const std::string& source) {
   }
   Eigen::Matrix3d tensor;
   tensor << in.ixx, in.ixy, in.ixz, in.ixy, in.iyy, in.iyz, in.ixz, in.iyz, in.izz;
-  const Eigen::Vector3d eig = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(
-                                  tensor, Eigen::EigenvaluesOnly)
-                                  .eigenvalues();
-  // A relative margin, so that an inertia tiny but positive in every
-  // direction passes while one that is zero up to rounding does not.
-  const double largest = eig.cwiseAbs().maxCoeff();
-  const bool positive = eig.minCoeff() > 1e-12 * largest && largest > 0.0;
-  const bool semidefinite = eig.minCoeff() >= -1e-12 * largest;
-  if ((in.mass > 0.0 && !positive) || !semidefinite) {
-    fail(source, element + ": inertia tensor is not positive " +
-                     (in.mass > 0.0 ? "definite" : "semidefinite") + " (eigenvalues " +
-                     number(eig(0)) + ", " + number(eig(1)) + ", " + number(eig(2)) +
-                     "); expected " + (in.mass > 0.0 ? "positive" : "non-negative") +
-                     " principal moments about the centre of mass");
+  const Eigen::Vector3d moments = principal_moments(tensor);
+  // A moment that is zero up to rounding passes. The margin is 1e-12 of the
+  // largest moment or of m (1 m)^2, whichever is larger: 1e-12 m (1 m)^2 is
+  // m (1 um)^2, the moment of the mass at one micron, below what any robot
+  // description resolves, so a point mass written with noise (1e-20 entries
+  // from a CAD export) counts as zero.
+  const double unit_length_squared = 1.0;  // m^2
+  const double scale = std::max(moments.cwiseAbs().maxCoeff(), in.mass * unit_length_squared);
+  if (moments.minCoeff() < -1e-12 * scale) {
+    fail(source, element + ": inertia tensor is not positive semidefinite (" +
+                     eigenvalues_text(moments) +
+                     "); expected non-negative principal moments about the centre of mass");
   }
   const Eigen::Isometry3d frame = to_isometry(in.origin, source, element, "inertial origin");
   out.mass = in.mass;
   out.inertia = tensor;
   return transform(out, frame);
+}
+
+// A body that moves on its own joint and has mass needs a positive definite
+// inertia about its centre of mass, its welded links included. Then its
+// spatial inertia is positive definite, and a tree of such bodies has M(q)
+// positive definite at every q, not only at the initial state that
+// ArticulatedSystem checks. A point mass on its own joint fails here (MuJoCo
+// rejects it too); welded to a body with inertia it passes. Massless moving
+// bodies are left to the subtree-mass check. `welded[i]` counts the links
+// with mass welded into body i.
+void check_moving_inertia(const RigidTree& tree, const std::vector<int>& welded,
+                          const std::string& source) {
+  for (size_t i = 0; i < tree.bodies.size(); ++i) {
+    const TreeBody& body = tree.bodies[i];
+    if (!(body.inertia.mass > 0.0)) continue;
+    const Eigen::Vector3d moments = principal_moments(body.inertia.inertia);
+    // A relative margin, so that a tensor tiny but positive in every
+    // direction passes while one that is zero up to rounding does not.
+    const double largest = moments.cwiseAbs().maxCoeff();
+    if (moments.minCoeff() > 1e-12 * largest && largest > 0.0) continue;
+    const std::string with =
+        welded[i] ? " (with the " + count(welded[i], "link", "links") + " welded to it)" : "";
+    fail(source, quoted("link", body.link) + with + ": inertia tensor is not positive definite (" +
+                     eigenvalues_text(moments) +
+                     "); expected positive principal moments about the centre of mass, since it "
+                     "moves (joint '" +
+                     body.joint + "')");
+  }
 }
 
 // The ignored-features note: one line, only what the file actually has.
@@ -494,6 +537,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
   };
 
   const RigidInertia root_inertia = link_inertia(*root, source);
+  std::vector<int> welded;  // per body: links with mass welded into it
   int root_owner = -1;
   if (options.floating_base) {
     TreeBody body;
@@ -502,6 +546,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
     body.type = JointType::kFloating;
     body.inertia = root_inertia;
     tree.bodies.push_back(body);
+    welded.push_back(0);
     root_owner = 0;
   }
   push_children(*root, root_owner, Eigen::Isometry3d::Identity());
@@ -533,6 +578,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
       if (pending.owner >= 0) {
         TreeBody& owner = tree.bodies[pending.owner];
         owner.inertia = combine(owner.inertia, transform(inertia, placement));
+        welded[pending.owner] += inertia.mass > 0.0;
       }
       push_children(*child, pending.owner, placement);
       continue;
@@ -571,6 +617,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
       body.axis = axis.normalized();
     }
     tree.bodies.push_back(body);
+    welded.push_back(0);
     push_children(*child, static_cast<int>(tree.bodies.size()) - 1, Eigen::Isometry3d::Identity());
   }
 
@@ -597,6 +644,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
                        "') but carries no mass in its subtree; give it an <inertial>");
     }
   }
+  check_moving_inertia(tree, welded, source);
 
   const std::string note = ignored_note(*model, ignored, source);
   if (notes != nullptr && !note.empty()) notes->push_back(note);

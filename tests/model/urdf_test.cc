@@ -398,6 +398,20 @@ TEST(Urdf, RotatedInertialFrame) {
 
 // --- what Drake and MuJoCo accept -------------------------------------------
 
+// An input that must fail, and a fragment of its one-line message.
+struct BadCase {
+  const char* what;
+  std::string xml;
+  const char* fragment;
+};
+
+// A point-mass link: mass, no inertia about its own centre of mass.
+std::string point_mass(const std::string& name, double mass, const std::string& xyz = "0 0 0") {
+  return "<link name='" + name + "'><inertial><origin xyz='" + xyz + "'/><mass value='" +
+         std::to_string(mass) +
+         "'/><inertia ixx='0' iyy='0' izz='0' ixy='0' ixz='0' iyz='0'/></inertial></link>";
+}
+
 // urdfdom requires a <limit> with effort and velocity on revolute and
 // prismatic joints; limits are not simulated here, and Drake and MuJoCo take
 // such joints as unlimited.
@@ -440,6 +454,133 @@ TEST(UrdfLenient, MalformedMimicAndSafetyControllerAreIgnored) {
             "controllers (1 joint), calibration (1 joint)");
 }
 
+// Sensor frames and contact points as point masses on fixed joints (a
+// humanoid's camera frame of 0.01 kg, a quadruped's feet): welded into the
+// parent they are the exact union, like any welded link.
+TEST(UrdfLenient, PointMassesWeldIntoTheirParent) {
+  const RigidTree tree =
+      parse(robot("<link name='base'/>" + joint("j", "continuous", "base", "a") + link("a", 2.0) +
+                  joint("camera", "fixed", "a", "camera_frame", "<origin xyz='0 0 0.5'/>") +
+                  point_mass("camera_frame", 0.01) +
+                  joint("foot", "fixed", "a", "foot_frame", "<origin xyz='1 0 0'/>") +
+                  point_mass("foot_frame", 0.5, "0 0 -0.5")));
+  ASSERT_EQ(tree.bodies.size(), 1u);
+  const RigidInertia& body = tree.bodies[0].inertia;
+  EXPECT_DOUBLE_EQ(body.mass, 2.51);
+  // COM: (2 * 0 + 0.01 * (0, 0, 0.5) + 0.5 * (1, 0, -0.5)) / 2.51.
+  expect_near(body.com, Eigen::Vector3d(0.5, 0, -0.245) / 2.51, 1e-15, "com");
+  // The union computed independently: link a's tensor, plus the parallel-axis
+  // terms m (|r|^2 I - r r^T) of all three about the new COM.
+  Eigen::Matrix3d expected = tensor(1, 2, 3, 0, 0, 0);
+  const std::pair<double, Eigen::Vector3d> parts[] = {
+      {2.0, Eigen::Vector3d::Zero()}, {0.01, {0, 0, 0.5}}, {0.5, {1, 0, -0.5}}};
+  for (const auto& [m, p] : parts) {
+    const Eigen::Vector3d r = p - body.com;
+    expected += m * (r.squaredNorm() * Eigen::Matrix3d::Identity() - r * r.transpose());
+  }
+  expect_near(body.inertia, expected, 1e-14, "inertia about the COM");
+}
+
+// A root welded to the world drops out whatever its inertia; a floating root
+// that is a point (or a rank-one tensor, as a dummy "base" link often is)
+// moves with the trunk welded to it, and the two together have inertia.
+TEST(UrdfLenient, ASingularRootNeedsInertiaOnlyWithItsWeldedLinks) {
+  const std::string dummy_base =
+      "<link name='base'><inertial><mass value='1e-6'/><inertia ixx='1e-6' iyy='1e-6' "
+      "izz='1e-6' ixy='1e-6' ixz='1e-6' iyz='1e-6'/></inertial></link>";
+  const std::string xml =
+      robot(dummy_base + joint("bolt", "fixed", "base", "trunk") + link("trunk", 20.0) +
+            joint("hip", "continuous", "trunk", "leg") + link("leg"));
+  const RigidTree welded = parse(xml);
+  ASSERT_EQ(welded.bodies.size(), 1u);
+  const RigidTree floating = parse(xml, nullptr, true);
+  ASSERT_EQ(floating.bodies.size(), 2u);
+  EXPECT_DOUBLE_EQ(floating.bodies[0].inertia.mass, 20.0 + 1e-6);
+
+  // Alone, the same root would have no inertia about two axes.
+  EXPECT_NE(
+      error_of(robot(dummy_base + joint("hip", "continuous", "base", "leg") + link("leg")), true)
+          .find("test.urdf: link 'base': inertia tensor is not positive definite"),
+      std::string::npos);
+}
+
+// A link whose own tensor is singular (a thin rod about its axis) moves with
+// the tip welded to it: the body as a whole has inertia in every direction.
+TEST(UrdfLenient, AMovingLinkMayLeanOnItsWeldedLinks) {
+  const std::string rod =
+      "<link name='rod'><inertial><mass value='0.03'/><inertia ixx='1.2e-4' iyy='1.2e-4' izz='0' "
+      "ixy='0' ixz='0' iyz='0'/></inertial></link>";
+  const RigidTree tree = parse(
+      robot("<link name='base'/>" + joint("j", "continuous", "base", "rod", "<axis xyz='0 1 0'/>") +
+            rod + joint("tip", "fixed", "rod", "tip_link") + link("tip_link", 0.01)));
+  ASSERT_EQ(tree.bodies.size(), 1u);
+  EXPECT_DOUBLE_EQ(tree.bodies[0].inertia.mass, 0.04);
+}
+
+// Tensors exported as zero plus rounding noise (1e-20 entries; one principal
+// moment comes out slightly negative) are a point mass, not an error.
+TEST(UrdfLenient, RoundingNoiseInAPointMassIsZero) {
+  const RigidTree tree = parse(robot(
+      "<link name='base'/>" + joint("j", "continuous", "base", "a") + link("a") +
+      joint("ankle", "fixed", "a", "ankle_link") +
+      "<link name='ankle_link'><inertial><origin xyz='0.008 0 0.0553'/><mass value='0.2675'/>"
+      "<inertia ixx='0' iyy='0' izz='0' ixy='0' ixz='1.35525e-20' iyz='0'/></inertial></link>"));
+  ASSERT_EQ(tree.bodies.size(), 1u);
+  EXPECT_DOUBLE_EQ(tree.bodies[0].inertia.mass, 1.2675);
+}
+
+// What stays an error: a point mass that moves on its own joint (also with
+// only point masses welded to it: a dumbbell has no inertia about its own
+// axis), and a tensor that no mass distribution has, welded or not.
+TEST(UrdfLenient, GenuinelyBadInertiaIsStillRejected) {
+  const std::string base = "<link name='base'/>";
+  const std::string not_psd =
+      "<inertia ixx='1' iyy='1' izz='1' ixy='2' ixz='0' iyz='0'/>";  // eigenvalues -1, 1, 3
+  const std::vector<BadCase> cases = {
+      {"moving point mass",
+       robot(base + joint("j", "continuous", "base", "a") + point_mass("a", 1.0, "0.5 0 0")),
+       "test.urdf: link 'a': inertia tensor is not positive definite (eigenvalues 0, 0, 0); "
+       "expected positive principal moments about the centre of mass, since it moves (joint "
+       "'j')"},
+      {"moving dumbbell",
+       robot(base + joint("j", "continuous", "base", "a") + point_mass("a", 1.0) +
+             joint("w", "fixed", "a", "b", "<origin xyz='1 0 0'/>") + point_mass("b", 1.0)),
+       "test.urdf: link 'a' (with the 1 link welded to it): inertia tensor is not positive "
+       "definite (eigenvalues 0, "},
+      {"floating point mass", robot(point_mass("base", 1.0)),
+       "test.urdf: link 'base': inertia tensor is not positive definite (eigenvalues 0, 0, 0); "
+       "expected positive principal moments about the centre of mass, since it moves (joint "
+       "'floating_base')"},
+      {"welded, not semidefinite",
+       robot(base + joint("j", "continuous", "base", "a") + link("a") +
+             joint("w", "fixed", "a", "b") + "<link name='b'><inertial><mass value='1'/>" +
+             not_psd + "</inertial></link>"),
+       "test.urdf: link 'b': inertia tensor is not positive semidefinite (eigenvalues -1, 1, 3); "
+       "expected non-negative principal moments about the centre of mass"},
+      {"welded to the world, not semidefinite",
+       robot("<link name='base'><inertial><mass value='1'/>" + not_psd + "</inertial></link>" +
+             joint("j", "continuous", "base", "a") + link("a")),
+       "test.urdf: link 'base': inertia tensor is not positive semidefinite (eigenvalues -1, 1, "
+       "3)"},
+      {"welded, negative mass",
+       robot(base + joint("j", "continuous", "base", "a") + link("a") +
+             joint("w", "fixed", "a", "b") + link("b", -0.01)),
+       "test.urdf: link 'b': mass is -0.01; expected a finite value >= 0"},
+      {"welded, NaN inertia",
+       robot(base + joint("j", "continuous", "base", "a") + link("a") +
+             joint("w", "fixed", "a", "b") +
+             "<link name='b'><inertial><mass value='1'/><inertia ixx='nan' iyy='1' izz='1' "
+             "ixy='0' ixz='0' iyz='0'/></inertial></link>"),
+       "test.urdf: "},
+  };
+  for (const BadCase& c : cases) {
+    SCOPED_TRACE(c.what);
+    const std::string message = error_of(c.xml, std::string(c.what) == "floating point mass");
+    EXPECT_NE(message.find(c.fragment), std::string::npos) << "message: " << message;
+    EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+  }
+}
+
 // --- the note and urdfdom's own output --------------------------------------
 
 TEST(Urdf, NothingIgnoredMeansNoNote) {
@@ -480,26 +621,24 @@ TEST(Urdf, UrdfdomNeverWritesToStderr) {
 
 // --- rejections -------------------------------------------------------------
 
-struct BadCase {
-  const char* what;
-  std::string xml;
-  const char* fragment;
-};
-
 TEST(Urdf, RejectsWithOneLineNamingTheElement) {
   const std::string base = "<link name='base'/>";
   const std::string inertia = "<inertia ixx='1' iyy='1' izz='1' ixy='0' ixz='0' iyz='0'/>";
   const std::vector<BadCase> cases = {
       {"empty", "  \n", "test.urdf: empty file; expected URDF XML with a <robot> element"},
-      {"binary", std::string("<robot>\0</robot>", 16), "test.urdf:1: not a text file (control byte 0x00)"},
+      {"binary", std::string("<robot>\0</robot>", 16),
+       "test.urdf:1: not a text file (control byte 0x00)"},
       {"broken XML", "<robot name='r'><link name='a'></robot>", "test.urdf:1:"},
-      {"not robot", "<model name='r'/>", "test.urdf: the root element is <model>; expected <robot>"},
+      {"not robot", "<model name='r'/>",
+       "test.urdf: the root element is <model>; expected <robot>"},
       {"no element", "<?xml version='1.0'?>", "test.urdf:"},
-      {"cycle", robot(link("a") + link("b") + joint("ab", "continuous", "a", "b") +
-                      joint("ba", "continuous", "b", "a")),
+      {"cycle",
+       robot(link("a") + link("b") + joint("ab", "continuous", "a", "b") +
+             joint("ba", "continuous", "b", "a")),
        "test.urdf: joints 'ba', 'ab' form a cycle (link 'b' is its own ancestor); expected a tree"},
-      {"self loop", robot(base + link("a") + joint("j", "continuous", "base", "a") +
-                          joint("k", "continuous", "a", "a")),
+      {"self loop",
+       robot(base + link("a") + joint("j", "continuous", "base", "a") +
+             joint("k", "continuous", "a", "a")),
        "test.urdf: link 'a' is the child of two joints ('j' and 'k')"},
       {"self loop without root", robot(link("a") + joint("k", "continuous", "a", "a")),
        "test.urdf: joint 'k' forms a cycle (link 'a' is its own ancestor)"},
@@ -512,16 +651,17 @@ TEST(Urdf, RejectsWithOneLineNamingTheElement) {
       {"unknown type", robot(base + link("a") + joint("j", "ball", "base", "a")),
        "Joint [j] has no known type [ball]"},
       {"zero axis",
-       robot(base + link("a") + joint("j3", "prismatic", "base", "a",
-                                      "<axis xyz='0 0 0'/><limit effort='1' velocity='1'/>")),
+       robot(base + link("a") +
+             joint("j3", "prismatic", "base", "a",
+                   "<axis xyz='0 0 0'/><limit effort='1' velocity='1'/>")),
        "test.urdf: joint 'j3': axis is zero; expected a non-zero vector"},
       {"negative mass",
        robot(base + "<link name='a'><inertial><mass value='-1'/>" + inertia + "</inertial></link>" +
              joint("j", "continuous", "base", "a")),
        "test.urdf: link 'a': mass is -1; expected a finite value >= 0"},
       {"NaN mass",
-       robot(base + "<link name='a'><inertial><mass value='nan'/>" + inertia + "</inertial></link>" +
-             joint("j", "continuous", "base", "a")),
+       robot(base + "<link name='a'><inertial><mass value='nan'/>" + inertia +
+             "</inertial></link>" + joint("j", "continuous", "base", "a")),
        "test.urdf: invalid URDF: "},
       {"not PD",
        robot(base +
@@ -529,8 +669,8 @@ TEST(Urdf, RejectsWithOneLineNamingTheElement) {
              "ixz='0' iyz='0'/></inertial></link>" +
              joint("j", "continuous", "base", "a")),
        "test.urdf: link 'a': inertia tensor is not positive definite (eigenvalues 0, 1, 1)"},
-      {"NaN origin", robot(base + link("a") + joint("j", "continuous", "base", "a",
-                                                    "<origin xyz='0 0 nan'/>")),
+      {"NaN origin",
+       robot(base + link("a") + joint("j", "continuous", "base", "a", "<origin xyz='0 0 nan'/>")),
        "Malformed parent origin element for joint [j]"},
       {"massless moving subtree",
        robot(base + "<link name='a'/><link name='b'/>" + joint("j", "continuous", "base", "a") +
@@ -540,8 +680,7 @@ TEST(Urdf, RejectsWithOneLineNamingTheElement) {
       {"massless floating root", robot("<link name='base'/>"),
        "test.urdf: link 'base' moves (joint 'floating_base') but carries no mass"},
       {"negative damping",
-       robot(base + link("a") +
-             joint("j", "continuous", "base", "a", "<dynamics damping='-1'/>")),
+       robot(base + link("a") + joint("j", "continuous", "base", "a", "<dynamics damping='-1'/>")),
        "test.urdf: joint 'j': damping is -1; expected a finite value >= 0"},
       {"two parents",
        robot(base + link("a") + link("b") + joint("j1", "continuous", "base", "a") +

@@ -24,12 +24,14 @@ struct UrdfOptions {
 // Reads `path`. Throws InputError naming the file and the element (link or
 // joint) for: a missing or unreadable file, broken XML, what urdfdom rejects
 // (its message passed on), a cycle or several roots, a joint type outside
-// the supported set, a zero axis, a non-finite number, a negative mass, an
-// inertia tensor that is not symmetric positive definite (about the COM; a
-// massless link may carry a semidefinite one), and a moving subtree without
-// mass (it would make M singular). Cycles and links with two parents are
-// found before urdfdom sees the file. `notes` (may be null) receives one line per file listing what
-// was ignored.
+// the supported set, a zero axis, a non-finite number, a negative mass, a
+// link's inertia tensor that is not positive semidefinite (about its COM; a
+// point mass on a fixed joint is fine), a moving body with mass whose
+// tensor about its COM, the links welded to it included, is not positive
+// definite (then M(q) is positive definite at every q), and a moving
+// subtree without mass (it would make M singular). Cycles and links with
+// two parents are found before urdfdom sees the file. `notes` (may be null)
+// receives one line per file listing what was ignored.
 RigidTree load_urdf(const std::string& path, const UrdfOptions& options,
                     std::vector<std::string>* notes);
 
