@@ -23,13 +23,6 @@ std::string MethodSpec::label() const {
 }
 
 namespace {
-double resident_megabytes() {
-  std::ifstream statm("/proc/self/statm");
-  long pages = 0, resident = 0;
-  statm >> pages >> resident;
-  return static_cast<double>(resident) * 4096.0 / (1024.0 * 1024.0);
-}
-
 std::vector<double> sample_times(const BenchScene& scene) {
   std::vector<double> t;
   const int n = static_cast<int>(std::llround(scene.t_final / scene.sample_period));
@@ -120,7 +113,6 @@ MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const Be
     run.message = e.what();
   }
   run.wall_seconds = elapsed();
-  run.resident_mb = resident_megabytes();
   const IntegratorStatistics& st = integrator->statistics();
   run.stats = st;
   run.steps = st.steps_taken;

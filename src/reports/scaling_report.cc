@@ -1,6 +1,7 @@
 // Time per step against the number of degrees of freedom: particle ropes,
 // cloth, compliant chains (sparse) and exact chains (dense), VIE against IE,
-// with the split of a step's time and the fitted exponent.
+// with the split of a step's time, the fitted exponent and each run's peak
+// memory (each run in a process of its own, child_process_run.h).
 
 #include <cmath>
 #include <cstdio>
@@ -12,6 +13,7 @@
 #include <sstream>
 
 #include "stiffsim/error.h"
+#include "stiffsim/reports/child_process_run.h"
 #include "stiffsim/reports/method_run.h"
 #include "stiffsim/reports/reports.h"
 
@@ -25,6 +27,18 @@ struct Family {
   double step;
   int ie_max_dofs;  // IE only up to this size (it is the slow one)
 };
+
+// Steps after the first: the first pays the symbolic analysis and the
+// first Jacobian and factorization once per run.
+bool measured(const MethodRun& r) { return r.steps >= 2; }
+double per_step(const MethodRun& r) {
+  return (r.wall_seconds - r.first_step_wall_seconds) / std::max(1L, r.steps - 1);
+}
+
+// 0: the run was not made (its process never started).
+std::string peak_text(const MethodRun& r) {
+  return r.peak_resident_mb > 0.0 ? format_number("%.0f", r.peak_resident_mb) : "-";
+}
 
 struct Point {
   std::string family, method;
@@ -43,33 +57,51 @@ int run_scaling_report(const ReportOptions& options) {
   const bool quick = options.quick;
   const int steps = quick ? 5 : 10;
   std::vector<Family> families;
-  families.push_back({"particle rope", quick ? std::vector<int>{34, 334, 3334} : std::vector<int>{34, 334, 3334, 33334},
-                      [](int n) { return rope_scene_at_shipped_spacing(n, 1e5, 1.0); }, 1e-3,
-                      quick ? 10000 : 100000});
-  families.push_back({"cloth", quick ? std::vector<int>{6, 18, 58} : std::vector<int>{6, 18, 58, 100, 183},
-                      [](int n) { return cloth_scene_at_shipped_spacing(n, 1e3, 1.0); },
-                      1.0 / 60.0, quick ? 10000 : 31000});
-  families.push_back({"compliant chain",
-                      quick ? std::vector<int>{17, 167, 1667} : std::vector<int>{17, 167, 1667, 16667},
-                      [](int n) { return compliant_chain_scene(n, 0.05, 1e6, 1e4, 1.0); }, 1e-3,
-                      quick ? 10000 : 10000});
-  families.push_back({"exact chain", quick ? std::vector<int>{10, 30, 100} : std::vector<int>{10, 30, 100, 300, 1000},
-                      [](int n) { return chain_scene(n, 0.05, 0.0, 1.0); }, 1e-3, quick ? 100 : 300});
+  families.push_back(
+      {"particle rope",
+       quick ? std::vector<int>{34, 334, 3334} : std::vector<int>{34, 334, 3334, 33334},
+       [](int n) { return rope_scene_at_shipped_spacing(n, 1e5, 1.0); }, 1e-3,
+       quick ? 10000 : 100000});
+  families.push_back({"cloth",
+                      quick ? std::vector<int>{6, 18, 58} : std::vector<int>{6, 18, 58, 100, 183},
+                      [](int n) { return cloth_scene_at_shipped_spacing(n, 1e3, 1.0); }, 1.0 / 60.0,
+                      quick ? 10000 : 31000});
+  families.push_back(
+      {"compliant chain",
+       quick ? std::vector<int>{17, 167, 1667} : std::vector<int>{17, 167, 1667, 16667},
+       [](int n) { return compliant_chain_scene(n, 0.05, 1e6, 1e4, 1.0); }, 1e-3,
+       quick ? 10000 : 10000});
+  families.push_back(
+      {"exact chain",
+       quick ? std::vector<int>{10, 30, 100} : std::vector<int>{10, 30, 100, 300, 1000},
+       [](int n) { return chain_scene(n, 0.05, 0.0, 1.0); }, 1e-3, quick ? 100 : 300});
+
+  const double budget = quick ? 30.0 : 300.0;
+  // A run checks its budget between steps; its process is killed when one
+  // step runs far past it: the budget, half of it again, and 10 s.
+  ChildProcessOptions child;
+  child.kill_after_seconds = 1.5 * budget + 10.0;
+  // Part of every row's peak: the program and the report's pages that a
+  // child shares from the fork.
+  const double floor_mb = run_in_child_process([] { return MethodRun{}; }, child).peak_resident_mb;
 
   std::vector<Point> points;
   for (const Family& f : families) {
     for (int size : f.sizes) {
+      // Built here, before the fork: the child's peak counts it, and this
+      // process gives its memory back before the next fork.
       BenchScene s = f.build(size);
       s.t_final = steps * f.step;
       s.sample_period = s.t_final;
-      for (const char* method : {"vie", "ie"}) {
-        if (std::string(method) == "ie" && s.dofs() > f.ie_max_dofs) continue;
+      for (const std::string method : {"vie", "ie"}) {
+        if (method == "ie" && s.dofs() > f.ie_max_dofs) continue;
         BenchRunOptions o;
-        o.wall_budget_seconds = quick ? 30.0 : 300.0;
-        const MethodRun run = run_stiffsim(s, {method, true, f.step}, o);
+        o.wall_budget_seconds = budget;
+        const MethodSpec spec{method, true, f.step};
+        const MethodRun run = run_in_child_process([&] { return run_stiffsim(s, spec, o); }, child);
         say("scaling: " + f.name + " " + std::to_string(s.dofs()) + " DOFs, " + method + ": " +
-            format_number("%.3f", 1e3 * (run.wall_seconds - run.first_step_wall_seconds) / std::max(1L, run.steps - 1)) +
-            " ms/step after the first" +
+            (measured(run) ? format_number("%.3f", 1e3 * per_step(run)) : std::string("-")) +
+            " ms/step after the first, peak MB " + peak_text(run) +
             (run.finished ? "" : " (" + run.message + ")"));
         points.push_back({f.name, method, s.dofs(), run});
       }
@@ -77,23 +109,30 @@ int run_scaling_report(const ReportOptions& options) {
   }
 
   std::ostringstream md;
+  char limits[256];
+  std::snprintf(limits, sizeof limits,
+                " A run stops after its first step that ends past %.0f s; a process still inside a"
+                " step at %.0f s is killed. Either is unfinished.",
+                budget, child.kill_after_seconds);
   md << "# Scaling\n\nMachine: " << machine_description() << ".\n\n"
-     << "Each point: the mean of steps 2.." << steps << " of a run of fixed steps (h = 1 ms for ropes and chains, 1/60 s for cloth) from "
-     << "the scene's initial state, time per step split as the statistics count it. Ropes and cloth "
-     << "keep the node spacing and node mass of models/rope.yaml and models/cloth.yaml at every "
-     << "size (a longer rope, a larger sheet), so that a node's dynamics do not change with size. Memory: the "
-     << "process's resident set at the end of the run.\n\n"
-     << "| family | method | DOFs | ms/step | jacobian | assembly | factorization | solve | derivatives "
-     << "| factorizations/step | nnz matrix | nnz factor | MB | solver |\n"
+     << "Each point: the mean of steps 2.." << steps << " of a run of fixed steps (h = 1 ms for "
+     << "ropes and chains, 1/60 s for cloth) from the scene's initial state, time per step split "
+     << "as the statistics count it. Ropes and cloth keep the node spacing and node mass of "
+     << "models/rope.yaml and models/cloth.yaml at every size (a longer rope, a larger sheet), so "
+     << "that a node's dynamics do not change with size." << limits << "\n\n"
+     << "peak MB: the peak resident set (ru_maxrss, 1 MB = 2^20 bytes) of a process forked from "
+     << "the report for that one run: the scene (built by the report just before the fork), the "
+     << "integrator with its matrices and factors, and all else the run allocated, from malloc or "
+     << "not; plus the pages it shares with the report from the fork (program, libraries, report "
+     << "data: a child that does nothing peaks at " << format_number("%.0f", floor_mb)
+     << " MB).\n\n"
+     << "| family | method | DOFs | ms/step | jacobian | assembly | factorization | solve "
+     << "| derivatives | factorizations/step | nnz matrix | nnz factor | peak MB | solver |\n"
      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   std::ofstream csv(fs::path(options.out_dir) / "scaling.csv");
-  csv << "family,method,dofs,steps,ms_per_step,jacobian_ms,assembly_ms,factorization_ms,solve_ms,derivative_ms,"
-         "factorizations_per_step,nnz_matrix,nnz_factor,resident_mb,linear_solver,finished\n";
-  // Steps after the first: the first pays the symbolic analysis and the
-  // first Jacobian and factorization once per run.
-  auto per_step = [](const MethodRun& r) {
-    return (r.wall_seconds - r.first_step_wall_seconds) / std::max(1L, r.steps - 1);
-  };
+  csv << "family,method,dofs,steps,ms_per_step,jacobian_ms,assembly_ms,factorization_ms,solve_ms,"
+         "derivative_ms,factorizations_per_step,nnz_matrix,nnz_factor,peak_resident_mb,"
+         "linear_solver,finished\n";
   for (const Point& p : points) {
     IntegratorStatistics st = p.run.stats;
     const IntegratorStatistics& f = p.run.first_step_stats;
@@ -104,19 +143,30 @@ int run_scaling_report(const ReportOptions& options) {
     st.derivative_seconds -= f.derivative_seconds;
     st.iteration_matrix_factorizations -= f.iteration_matrix_factorizations;
     const double n = std::max(1L, p.run.steps - 1);
-    auto ms = [&](double seconds) { return format_number("%.4f", 1e3 * seconds / n); };
+    // A run with fewer than two steps has no time per step to show.
+    // A run with fewer than two steps has no time per step, one not made no
+    // peak: an empty CSV field, "-" in the table.
+    auto ms = [&](double seconds) {
+      return measured(p.run) ? format_number("%.4f", 1e3 * seconds / n) : std::string();
+    };
+    auto cell = [](const std::string& text) { return text.empty() ? std::string("-") : text; };
+    const double wall = p.run.wall_seconds - p.run.first_step_wall_seconds;
     csv << csv_field(p.family) << "," << p.method << "," << p.dofs << "," << p.run.steps << ","
-        << format_number("%.4f", 1e3 * per_step(p.run)) << "," << ms(st.jacobian_seconds) << "," << ms(st.assembly_seconds) << ","
-        << ms(st.factorization_seconds) << "," << ms(st.solve_seconds) << "," << ms(st.derivative_seconds) << ","
-        << format_number("%.2f", st.iteration_matrix_factorizations / n) << "," << st.iteration_matrix_nonzeros << ","
-        << st.factor_nonzeros << "," << format_number("%.1f", p.run.resident_mb) << "," << csv_field(p.run.linear_solver)
-        << "," << (p.run.finished ? 1 : 0) << "\n";
-    md << "| " << p.family << " | " << p.method << " | " << p.dofs << " | " << format_number("%.4f", 1e3 * per_step(p.run)) << " | "
-       << ms(st.jacobian_seconds) << " | " << ms(st.assembly_seconds) << " | " << ms(st.factorization_seconds)
-       << " | " << ms(st.solve_seconds) << " | " << ms(st.derivative_seconds) << " | "
-       << format_number("%.2f", st.iteration_matrix_factorizations / n) << " | " << st.iteration_matrix_nonzeros << " | "
-       << st.factor_nonzeros << " | " << format_number("%.0f", p.run.resident_mb) << " | " << p.run.linear_solver
-       << (p.run.finished ? "" : " (" + p.run.message + ")") << " |\n";
+        << ms(wall) << "," << ms(st.jacobian_seconds) << "," << ms(st.assembly_seconds) << ","
+        << ms(st.factorization_seconds) << "," << ms(st.solve_seconds) << ","
+        << ms(st.derivative_seconds) << ","
+        << format_number("%.2f", st.iteration_matrix_factorizations / n) << ","
+        << st.iteration_matrix_nonzeros << "," << st.factor_nonzeros << ","
+        << (p.run.peak_resident_mb > 0.0 ? format_number("%.1f", p.run.peak_resident_mb) : "")
+        << "," << csv_field(p.run.linear_solver) << "," << (p.run.finished ? 1 : 0) << "\n";
+    md << "| " << p.family << " | " << p.method << " | " << p.dofs << " | " << cell(ms(wall))
+       << " | " << cell(ms(st.jacobian_seconds)) << " | " << cell(ms(st.assembly_seconds)) << " | "
+       << cell(ms(st.factorization_seconds)) << " | " << cell(ms(st.solve_seconds)) << " | "
+       << cell(ms(st.derivative_seconds)) << " | "
+       << format_number("%.2f", st.iteration_matrix_factorizations / n) << " | "
+       << st.iteration_matrix_nonzeros << " | " << st.factor_nonzeros << " | " << peak_text(p.run)
+       << " | " << p.run.linear_solver << (p.run.finished ? "" : " (" + p.run.message + ")")
+       << " |\n";
   }
   md << "\n## Fitted exponents (time per step ~ DOFs^p, VIE, sizes >= 1000 DOFs)\n\n| family | p | points |\n|---|---|---|\n";
   for (const Family& f : families) {
@@ -136,7 +186,8 @@ int run_scaling_report(const ReportOptions& options) {
   for (const Point& p : points) {
     if (p.method != "vie") continue;
     for (const Point& q : points) {
-      if (q.method == "ie" && q.family == p.family && q.dofs == p.dofs) {
+      if (q.method == "ie" && q.family == p.family && q.dofs == p.dofs && measured(p.run) &&
+          measured(q.run)) {
         const double a = per_step(p.run);
         const double b = per_step(q.run);
         md << "| " << p.family << " | " << p.dofs << " | " << format_number("%.3f", 1e3 * a) << " | "

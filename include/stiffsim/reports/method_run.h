@@ -21,6 +21,8 @@ struct MethodSpec {
   std::string label() const;  // e.g. "vie accuracy 1e-03", "ie h 1e-03"
 };
 
+// A field added here must be added to the payload a child process sends
+// back (child_process_run.cc) too.
 struct MethodRun {
   MethodSpec spec;
   std::vector<double> times;
@@ -37,7 +39,9 @@ struct MethodRun {
   double energy_start = 0.0, energy_max = 0.0, energy_end = 0.0;  // when tracked
   double kinetic_max = 0.0;  // largest kinetic energy 1/2 v^T M v seen, when tracked
   bool non_finite = false;
-  double resident_mb = 0.0;  // process resident memory at the end of the run, integrator alive
+  // Peak resident set of the process that made this run alone
+  // (run_in_child_process); 0 when it ran inside the caller's process.
+  double peak_resident_mb = 0.0;
   // After the first step (symbolic analysis, first Jacobian and
   // factorization): the scaling report measures the steps after it.
   double first_step_wall_seconds = 0.0;
