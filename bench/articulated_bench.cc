@@ -1,7 +1,9 @@
 // The kernels of an articulated step: F by recursive Newton-Euler, M by the
 // composite rigid body algorithm, the exact K and D by seeded forward-mode
 // differentiation, for chains in reduced coordinates (dense) and as free
-// bodies with bushings (sparse), and one VIE step of each.
+// bodies with bushings (sparse), and one VIE step of each; and the exact
+// chain's K and D by the analytic Newton-Euler derivatives against the
+// automatic differentiation they replace.
 //
 //   build/bench/articulated_bench --benchmark_repetitions=5
 //     --benchmark_report_aggregates_only=true
@@ -9,6 +11,7 @@
 #include <benchmark/benchmark.h>
 
 #include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/model/rnea_derivatives.h"
 #include "stiffsim/reports/bench_scenes.h"
 
 namespace stiffsim {
@@ -55,6 +58,30 @@ void BM_Jacobians(benchmark::State& state) {
   state.counters["passes"] = sys->jacobian_passes();
 }
 
+// Exact chain at a state where every term is nonzero (all joints bent and
+// moving), with the acceleration term as Newton requests it.
+void BM_ExactJacobians(benchmark::State& state) {
+  const int links = static_cast<int>(state.range(0));
+  const bool analytic = state.range(1) != 0;
+  const auto sys = make_system(links, false);
+  const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(links, 0.1, 0.4);
+  const Eigen::VectorXd v = Eigen::VectorXd::LinSpaced(links, -1.0, 1.0);
+  const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(links, 2.0, -3.0);
+  RneaDerivatives rnea = make_rnea_derivatives(*sys);
+  ForceJacobians J = sys->jacobian_pattern();
+  JacobianRequest request;
+  request.acceleration = a.data();
+  for (auto _ : state) {
+    if (analytic) {
+      rnea.compute(q, v, a.data(), &J.dF_dq, &J.dF_dv);
+    } else {
+      sys->automatic_force_jacobians(0.0, q, v, Eigen::VectorXd(), request, &J);
+    }
+    benchmark::DoNotOptimize(J.dF_dq.valuePtr());
+    benchmark::DoNotOptimize(J.dF_dv.valuePtr());
+  }
+}
+
 void BM_VieStep(benchmark::State& state) {
   const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
   IntegratorSettings s;
@@ -70,6 +97,11 @@ void BM_VieStep(benchmark::State& state) {
 BENCHMARK(BM_Forces)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_MassMatrix)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_Jacobians)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMillisecond);
+// Args: links, analytic (0 automatic differentiation, 1 analytic).
+BENCHMARK(BM_ExactJacobians)
+    ->ArgNames({"links", "analytic"})
+    ->ArgsProduct({{10, 100, 1000}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VieStep)->Args({10, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMillisecond);
 
 }  // namespace
