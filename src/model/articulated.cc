@@ -11,6 +11,7 @@
 #include "stiffsim/model/inverse_dynamics.h"
 #include "stiffsim/model/joints.h"
 #include "stiffsim/model/quaternion.h"
+#include "stiffsim/model/rnea_derivatives.h"
 
 namespace stiffsim {
 namespace {
@@ -658,7 +659,10 @@ void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const
                                         const ConstVectorRef& z, const JacobianRequest& request,
                                         ForceJacobians* J) const {
   (void)t, (void)z;
-  exact_jacobians(q, v, request.acceleration, J);
+  if (!options_.bushings.empty()) return exact_jacobians(q, v, request.acceleration, J);
+  if (!derivatives_) derivatives_ = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
+  derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+  J->approximated_terms = 0;
 }
 
 void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,

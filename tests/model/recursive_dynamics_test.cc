@@ -106,5 +106,34 @@ TEST(InverseDynamicsResidual, EqualsTheMassMatrixForm) {
   }
 }
 
+TEST(ArticulatedSystem, ForceJacobiansAreTheAnalyticDerivatives) {
+  // force_jacobians() (analytic RNEA derivatives) against
+  // automatic_force_jacobians() (forward-mode AD) through the System
+  // interface, with the inertial term of a given acceleration: both exact,
+  // so they agree to round-off (1e-10 of the largest entry).
+  int index = 0;
+  for (const auto& owned : systems_under_test()) {
+    const ArticulatedSystem& system = *owned;
+    const Dimensions d = system.dimensions();
+    Eigen::VectorXd q, v;
+    random_state(system, 21 + index, &q, &v);
+    const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(d.nv, 2.0, -1.0);
+    const Eigen::VectorXd z(0);
+    for (const double* acceleration : {static_cast<const double*>(nullptr), a.data()}) {
+      JacobianRequest request;
+      request.acceleration = acceleration;
+      ForceJacobians analytic = system.jacobian_pattern(), automatic = system.jacobian_pattern();
+      system.force_jacobians(0.0, q, v, z, request, &analytic);
+      system.automatic_force_jacobians(0.0, q, v, z, request, &automatic);
+      for (auto m : {&ForceJacobians::dF_dq, &ForceJacobians::dF_dv}) {
+        const Eigen::MatrixXd A(analytic.*m), B(automatic.*m);
+        EXPECT_LE((A - B).cwiseAbs().maxCoeff(), 1e-10 * B.cwiseAbs().maxCoeff())
+            << "system " << index;
+      }
+    }
+    ++index;
+  }
+}
+
 }  // namespace
 }  // namespace stiffsim

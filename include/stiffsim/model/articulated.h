@@ -28,6 +28,8 @@
 
 namespace stiffsim {
 
+class RneaDerivatives;
+
 // A joint spring tau = -stiffness (q - rest) and viscous damping
 // tau = -damping q_dot on a 1-DOF joint (revolute, prismatic), beside the
 // URDF's own <dynamics damping>.
@@ -114,9 +116,10 @@ class ArticulatedSystem : public System {
   // Exact trees (no bushings): the articulated-body recursion.
   std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const override;
   const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
-  // Exact K and D (complete: nothing dropped; request.acceleration honoured),
-  // by the same
-  // seeded forward-mode differentiation as automatic_force_jacobians.
+  // Exact K and D (complete: nothing dropped; request.acceleration
+  // honoured): analytic derivatives of the recursive Newton-Euler algorithm
+  // (rnea_derivatives.h) for trees without bushings, O(n d); with bushings
+  // the seeded forward-mode differentiation of automatic_force_jacobians.
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
@@ -190,6 +193,7 @@ class ArticulatedSystem : public System {
   // its first use.
   struct DualWorkspace;
   mutable std::unique_ptr<DualWorkspace> dual_;
+  mutable std::unique_ptr<RneaDerivatives> derivatives_;  // made on first use
 
  public:
   ~ArticulatedSystem() override;
