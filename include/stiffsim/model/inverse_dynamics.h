@@ -33,16 +33,26 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
     const JointMotion<T> jm = joint_motion<T>(b, q.segment(model.q_offset[i], joint_nq(b.type)));
     d.pose[i] = jm.pose;
     d.S[i] = jm.S;
-    // Joint-sized values in vectors of fixed capacity: a product with a
-    // dynamic-size expression would allocate a temporary per body.
-    const JointVector<T> vj = v.segment(model.v_offset[i], nv);
-    const Vec6<T> vJ = jm.S * vj;
-    Vec6<T> cJ = joint_velocity_product<T>(vJ);
-    if (acceleration) {
-      const JointVector<T> aj =
-          Eigen::Map<const Eigen::VectorXd>(acceleration + model.v_offset[i], nv)
-              .template cast<T>();
-      cJ += jm.S * aj;
+    Vec6<T> vJ, cJ;
+    if (nv == 1) {
+      // Revolute and prismatic joints, nearly every body: fixed-size
+      // arithmetic on S's one column (and no velocity product term).
+      const Vec6<T> s = jm.S.col(0);
+      vJ = s * v[model.v_offset[i]];
+      cJ.setZero();
+      if (acceleration) cJ = s * T(acceleration[model.v_offset[i]]);
+    } else {
+      // Joint-sized values in vectors of fixed capacity: a product with a
+      // dynamic-size expression would allocate a temporary per body.
+      const JointVector<T> vj = v.segment(model.v_offset[i], nv);
+      vJ = jm.S * vj;
+      cJ = joint_velocity_product<T>(vJ);
+      if (acceleration) {
+        const JointVector<T> aj =
+            Eigen::Map<const Eigen::VectorXd>(acceleration + model.v_offset[i], nv)
+                .template cast<T>();
+        cJ += jm.S * aj;
+      }
     }
     if (b.parent < 0) {
       d.V[i] = vJ;
@@ -58,8 +68,12 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
   for (int i = nb - 1; i >= 0; --i) {
     const TreeBody& b = model.tree.bodies[i];
     const int nv = joint_nv(b.type), vo = model.v_offset[i];
-    const JointVector<T> tau = d.S[i].transpose() * d.f[i];
-    d.F.segment(vo, nv) = -tau;
+    if (nv == 1) {
+      d.F[vo] = -Vec6<T>(d.S[i].col(0)).dot(d.f[i]);
+    } else {
+      const JointVector<T> tau = d.S[i].transpose() * d.f[i];
+      d.F.segment(vo, nv) = -tau;
+    }
     if (b.parent >= 0) d.f[b.parent] += force_to_parent<T>(d.pose[i], d.f[i]);
     if (nv == 1) {
       T& Fi = d.F[vo];
