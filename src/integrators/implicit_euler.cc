@@ -24,6 +24,8 @@ ImplicitEuler::ImplicitEuler(const System& system, IntegratorSettings settings,
     // Extrapolation needs the step-doubling pair; ie2 is IE with doubling.
     implicit_.error_estimator = ImplicitErrorEstimate::kStepDoubling;
   }
+  choose_structured_newton_matrix(
+      false, "the recursion solves VIE's velocity Newton systems; ie iterates on q and v together");
 }
 
 bool ImplicitEuler::uses_doubling() const {
