@@ -308,6 +308,11 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model_.tree.bodies[i];
     model_.inertia_matrix.push_back(model_.inertia[i].matrix());
+    const Eigen::Matrix3d K = skew(b.axis), P = b.placement.linear();
+    model_.placement_K.push_back(b.type == JointType::kRevolute ? Eigen::Matrix3d(P * K)
+                                                                : Eigen::Matrix3d::Zero());
+    model_.placement_K2.push_back(b.type == JointType::kRevolute ? Eigen::Matrix3d(P * K * K)
+                                                                 : Eigen::Matrix3d::Zero());
     // With its linear velocity in the world and its angular velocity in its
     // own frame, a free body whose origin is its centre of mass has the
     // constant M = diag(m I, I_c); anything else moves M with q.

@@ -27,6 +27,11 @@ struct ArticulatedModel {
   // - damping q_dot, damping being the URDF's plus the scene's.
   std::vector<double> stiffness, rest, damping;
   bool has_floating = false;
+  // Revolute joints: the body's rotation in its parent is
+  // P (I + sin(q) K + (1 - cos(q)) K^2) for placement rotation P and the
+  // axis' cross-product matrix K; P K and P K^2 are kept so that a pose
+  // costs two scaled 3x3 sums (zero for other joints).
+  std::vector<Eigen::Matrix3d> placement_K, placement_K2;
 
   int bodies() const { return static_cast<int>(tree.bodies.size()); }
 };

@@ -30,14 +30,29 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model.tree.bodies[i];
     const int nv = joint_nv(b.type);
-    const JointMotion<T> jm = joint_motion<T>(b, q.segment(model.q_offset[i], joint_nq(b.type)));
-    d.pose[i] = jm.pose;
-    d.S[i] = jm.S;
+    if (b.type == JointType::kRevolute) {
+      // joint_motion() without its Rodrigues products (see
+      // ArticulatedModel::placement_K): the common joint, a third of the pass.
+      using std::cos;
+      using std::sin;
+      const T angle = T(q[model.q_offset[i]]);
+      const T s = sin(angle), c1 = T(1.0) - cos(angle);
+      d.pose[i].R = b.placement.linear().cast<T>() + s * model.placement_K[i].cast<T>() +
+                    c1 * model.placement_K2[i].cast<T>();
+      d.pose[i].p = b.placement.translation().cast<T>();
+      d.S[i].setZero(6, 1);
+      d.S[i].col(0).template head<3>() = b.axis.cast<T>();
+    } else {
+      const JointMotion<T> jm = joint_motion<T>(b, q.segment(model.q_offset[i], joint_nq(b.type)));
+      d.pose[i] = jm.pose;
+      d.S[i] = jm.S;
+    }
+    const MotionSubspace<T>& S = d.S[i];
     Vec6<T> vJ, cJ;
     if (nv == 1) {
       // Revolute and prismatic joints, nearly every body: fixed-size
       // arithmetic on S's one column (and no velocity product term).
-      const Vec6<T> s = jm.S.col(0);
+      const Vec6<T> s = S.col(0);
       vJ = s * v[model.v_offset[i]];
       cJ.setZero();
       if (acceleration) cJ = s * T(acceleration[model.v_offset[i]]);
@@ -45,13 +60,13 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
       // Joint-sized values in vectors of fixed capacity: a product with a
       // dynamic-size expression would allocate a temporary per body.
       const JointVector<T> vj = v.segment(model.v_offset[i], nv);
-      vJ = jm.S * vj;
+      vJ = S * vj;
       cJ = joint_velocity_product<T>(vJ);
       if (acceleration) {
         const JointVector<T> aj =
             Eigen::Map<const Eigen::VectorXd>(acceleration + model.v_offset[i], nv)
                 .template cast<T>();
-        cJ += jm.S * aj;
+        cJ += S * aj;
       }
     }
     if (b.parent < 0) {
