@@ -69,14 +69,22 @@ JacobianEvaluator::JacobianEvaluator(const System& system, JacobianScheme scheme
                      "templated on the scalar): use " +
                      list_schemes(caps, true, false));
   }
+  // Differences colour the pattern here; the other schemes read it on
+  // their first evaluation, so a run that never asks for a Jacobian (the
+  // articulated-body recursion on a long exact chain, whose K and D are
+  // dense) never builds it.
+  if (differences_) prepare();
+}
 
-  const ForceJacobians& pattern = system.jacobian_pattern();
+void JacobianEvaluator::prepare() {
+  prepared_ = true;
+  const ForceJacobians& pattern = system_.jacobian_pattern();
   const auto blocks = blocks_of(pattern);
   const int rows[2] = {dims_.nv, dims_.nz}, cols[3] = {dims_.nq, dims_.nv, dims_.nz};
   for (int b = 0; b < 6; ++b) {
     if (blocks[b]->rows() != rows[b / 3] || blocks[b]->cols() != cols[b % 3] ||
         !blocks[b]->isCompressed()) {
-      throw std::logic_error(system.name() + ": jacobian_pattern()." + kBlockNames[b] +
+      throw std::logic_error(system_.name() + ": jacobian_pattern()." + kBlockNames[b] +
                              " is not a compressed " + std::to_string(rows[b / 3]) + " x " +
                              std::to_string(cols[b % 3]) + " matrix");
     }
@@ -94,7 +102,7 @@ JacobianEvaluator::JacobianEvaluator(const System& system, JacobianScheme scheme
   colouring_ = colour_columns(dims_.ny(), dims_.nx(), stacked);
   // A structured system may know a better colouring (a lattice tiling):
   // taken when it is valid and cheaper.
-  const std::vector<int> hint = system.jacobian_colouring_hint();
+  const std::vector<int> hint = system_.jacobian_colouring_hint();
   if (static_cast<int>(hint.size()) == dims_.nx()) {
     ColumnColouring known{hint, 0};
     for (int c : hint) known.colours = std::max(known.colours, c + 1);
@@ -224,6 +232,7 @@ void JacobianEvaluator::check_nothing_lost(int colour, const Eigen::VectorXd& f_
 
 int JacobianEvaluator::evaluate(double t, const Eigen::VectorXd& x, const JacobianRequest& request,
                                 ForceJacobians* J) {
+  if (!prepared_) prepare();
   if (x.size() != dims_.nx()) {
     throw std::logic_error("JacobianEvaluator: x has " + std::to_string(x.size()) +
                            " entries, the system " + std::to_string(dims_.nx()));

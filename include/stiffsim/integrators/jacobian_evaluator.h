@@ -67,6 +67,9 @@ class JacobianEvaluator {
   void check_nothing_lost(int colour, const Eigen::VectorXd& f_plus,
                           const Eigen::VectorXd& f_minus);
   void check_structure(const ForceJacobians& J) const;
+  // Reads and checks the system's pattern; colours it for differences.
+  void prepare();
+  bool prepared_ = false;
 
   const System& system_;
   const JacobianScheme scheme_;
