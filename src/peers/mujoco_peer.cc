@@ -10,7 +10,21 @@
 // - a <mujoco><compiler .../></mujoco> block keeps every link as its own
 //   body (fusestatic="false": a fixed joint becomes a body without joints,
 //   welded to its parent, which is what stiffsim's welding computes too) and
-//   leaves inertias unchanged (balanceinertia="false", no bounds).
+//   leaves inertias unchanged (balanceinertia="false", no bounds). Only
+//   when MuJoCo refuses a tensor whose principal moments break the triangle
+//   inequality A + B >= C (no mass distribution has such moments, but
+//   stiffsim needs only a positive semidefinite tensor, and published
+//   robots carry them on dummy links) is the file loaded again with
+//   balanceinertia="true", which replaces the moments of such bodies by
+//   their mean; PeerRun::settings then says so;
+// - for a floating base, a link named "world" and a joint of type floating
+//   from it to the root link: MuJoCo's URDF import takes the link "world"
+//   as its world body and makes a free joint of a floating one, which
+//   leaves the root link's frame where it is (no <origin>), as stiffsim's
+//   floating_base does. A free joint's qpos and qvel are stiffsim's floating
+//   coordinates: mj_integratePos adds qvel[0:3] to the position and turns
+//   the quaternion by qvel[3:6] on its right (mju_quatIntegrate), i.e. in
+//   the body frame.
 // Everything else is set on the compiled mjModel: gravity, time step,
 // integrator, contacts and limits off, armature and frictionloss 0, the
 // joint springs and total damping of the problem.
@@ -29,7 +43,44 @@
 #include <mujoco/mujoco.h>
 #endif
 
+#include "stiffsim/model/articulated.h"
+
 namespace stiffsim {
+
+MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string& urdf_path) {
+  if (!system.options().bushings.empty())
+    throw std::invalid_argument("MuJoCo peer: '" + system.name() +
+                                "' has bushings; only exact trees map to MuJoCo's joints");
+  const ArticulatedModel& model = system.model();
+  const ArticulatedOptions& options = system.options();
+  MujocoProblem problem;
+  problem.urdf_path = urdf_path;
+  for (int k = 0; k < 3; ++k) problem.gravity[k] = options.gravity[k];
+  for (int b = 0; b < model.bodies(); ++b) {
+    const TreeBody& body = model.tree.bodies[b];
+    const int qo = model.q_offset[b], vo = model.v_offset[b];
+    // load_urdf's floating base: the root link's own frame, free in the world.
+    if (body.type == JointType::kFloating && b == 0 && body.parent < 0 &&
+        body.joint == "floating_base" && body.placement.matrix() == Eigen::Matrix4d::Identity()) {
+      problem.floating_base_link = body.link;
+      for (int k = 0; k < 7; ++k) problem.initial_base_q[k] = options.initial_q[qo + k];
+      for (int k = 0; k < 6; ++k) problem.initial_base_v[k] = options.initial_v[vo + k];
+      continue;
+    }
+    if (body.type != JointType::kRevolute && body.type != JointType::kPrismatic)
+      throw std::invalid_argument(
+          std::string("MuJoCo peer: joint '") + body.joint + "' of '" + system.name() + "' is " +
+          joint_type_name(body.type) +
+          "; expected revolute or prismatic (or load_urdf's floating base)");
+    problem.joints.push_back(body.joint);
+    problem.initial_q.push_back(options.initial_q[qo]);
+    problem.initial_v.push_back(options.initial_v[vo]);
+    problem.stiffness.push_back(model.stiffness[b]);
+    problem.rest.push_back(model.rest[b]);
+    problem.damping.push_back(model.damping[b]);
+  }
+  return problem;
+}
 
 #ifndef STIFFSIM_HAVE_MUJOCO
 
@@ -92,7 +143,33 @@ void strip_elements(std::string* xml, const std::string& name) {
   }
 }
 
-std::string prepare_urdf(const std::string& path) {
+// `text` as an XML attribute value.
+std::string xml_attribute(const std::string& text) {
+  std::string out;
+  for (char c : text) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+// The name of the free joint added for a floating base (not "floating_base",
+// which a URDF may use itself).
+const char kFreeJointName[] = "stiffsim_floating_base";
+
+std::string prepare_urdf(const std::string& path, const std::string& floating_base_link,
+                         bool balance_inertia) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("MuJoCo peer: cannot read URDF file '" + path + "'");
   std::ostringstream text;
@@ -107,10 +184,24 @@ std::string prepare_urdf(const std::string& path) {
   if (robot_end == std::string::npos || xml[robot_end - 1] == '/')
     throw std::runtime_error("MuJoCo peer: '" + path + "' has an empty <robot> element");
   if (find_tag(xml, "mujoco", robot_end) == std::string::npos) {
-    xml.insert(robot_end + 1,
-               "\n  <mujoco><compiler discardvisual=\"true\" fusestatic=\"false\""
-               " balanceinertia=\"false\" boundmass=\"0\" boundinertia=\"0\""
-               " angle=\"radian\"/></mujoco>\n");
+    const std::string balance = balance_inertia ? "true" : "false";
+    xml.insert(
+        robot_end + 1,
+        "\n  <mujoco><compiler discardvisual=\"true\" fusestatic=\"false\" balanceinertia=\"" +
+            balance + "\" boundmass=\"0\" boundinertia=\"0\" angle=\"radian\"/></mujoco>\n");
+  }
+  if (!floating_base_link.empty()) {
+    if (floating_base_link == "world")
+      throw std::runtime_error("MuJoCo peer: '" + path +
+                               "': a root link named 'world' is MuJoCo's world body and cannot "
+                               "float");
+    const size_t robot_close = xml.rfind("</robot");
+    if (robot_close == std::string::npos)
+      throw std::runtime_error("MuJoCo peer: '" + path + "' has no </robot>");
+    xml.insert(robot_close, std::string("  <link name=\"world\"/>\n  <joint name=\"") +
+                                kFreeJointName + "\" type=\"floating\"><parent link=\"world\"/>" +
+                                "<child link=\"" + xml_attribute(floating_base_link) +
+                                "\"/></joint>\n");
   }
   return xml;
 }
@@ -127,6 +218,33 @@ struct VfsDeleter {
     delete v;
   }
 };
+
+// The model of URDF text `xml`, or null with MuJoCo's message in *error.
+mjModel* load_model(const std::string& xml, std::string* error) {
+  std::unique_ptr<mjVFS, VfsDeleter> vfs(new mjVFS);
+  mj_defaultVFS(vfs.get());
+  const char* kName = "stiffsim_mujoco_peer.urdf";
+  if (mj_makeEmptyFileVFS(vfs.get(), kName, static_cast<int>(xml.size())) != 0) {
+    *error = "cannot make a virtual file";
+    return nullptr;
+  }
+  const int file = mj_findFileVFS(vfs.get(), kName);
+  if (file < 0) {
+    *error = "virtual file lost";
+    return nullptr;
+  }
+  std::memcpy(vfs->filedata[file], xml.data(), xml.size());
+  char text[1024] = "";
+  mjModel* model = nullptr;
+  try {
+    model = mj_loadXML(kName, vfs.get(), text, sizeof text);
+  } catch (const std::runtime_error& e) {
+    *error = e.what();
+    return nullptr;
+  }
+  if (!model) *error = text;
+  return model;
+}
 
 std::string format_number(double x) {
   std::ostringstream s;
@@ -230,24 +348,18 @@ PeerRun run_mujoco(const MujocoProblem& problem) {
   }
 
   // Load the URDF from memory.
-  const std::string xml = prepare_urdf(problem.urdf_path);
-  std::unique_ptr<mjVFS, VfsDeleter> vfs(new mjVFS);
-  mj_defaultVFS(vfs.get());
-  const char* kName = "stiffsim_mujoco_peer.urdf";
-  if (mj_makeEmptyFileVFS(vfs.get(), kName, static_cast<int>(xml.size())) != 0)
-    throw std::runtime_error("MuJoCo peer: cannot make a virtual file for '" +
-                             problem.urdf_path + "'");
-  const int file = mj_findFileVFS(vfs.get(), kName);
-  if (file < 0)
-    throw std::runtime_error("MuJoCo peer: virtual file lost for '" + problem.urdf_path + "'");
-  std::memcpy(vfs->filedata[file], xml.data(), xml.size());
-
-  char error[1024] = "";
-  std::unique_ptr<mjModel, ModelDeleter> model;
-  try {
-    model.reset(mj_loadXML(kName, vfs.get(), error, sizeof error));
-  } catch (const std::runtime_error& e) {
-    throw std::runtime_error("MuJoCo could not load '" + problem.urdf_path + "': " + e.what());
+  const bool floating = !problem.floating_base_link.empty();
+  std::string error;
+  std::string balanced;  // what balanceinertia changed, when it had to be on
+  std::unique_ptr<mjModel, ModelDeleter> model(
+      load_model(prepare_urdf(problem.urdf_path, problem.floating_base_link, false), &error));
+  if (!model && error.find("A + B >= C") != std::string::npos) {
+    const size_t object = error.find("Object name = ");
+    balanced = object == std::string::npos
+                   ? std::string("a body")
+                   : error.substr(object + 14, error.find(',', object) - object - 14);
+    model.reset(
+        load_model(prepare_urdf(problem.urdf_path, problem.floating_base_link, true), &error));
   }
   if (!model)
     throw std::runtime_error("MuJoCo could not load '" + problem.urdf_path + "': " + error);
@@ -271,6 +383,15 @@ PeerRun run_mujoco(const MujocoProblem& problem) {
     m->qpos_spring[qadr[i]] = problem.rest[i];
     m->dof_damping[dadr[i]] = problem.damping[i];
   }
+  int base_qadr = 0, base_dadr = 0;
+  if (floating) {
+    const int j = mj_name2id(m, mjOBJ_JOINT, kFreeJointName);
+    if (j < 0 || m->jnt_type[j] != mjJNT_FREE)
+      throw std::runtime_error("MuJoCo peer: no free joint on link '" + problem.floating_base_link +
+                               "' of '" + problem.urdf_path + "'");
+    base_qadr = m->jnt_qposadr[j];
+    base_dadr = m->jnt_dofadr[j];
+  }
   for (int k = 0; k < m->nv; ++k) {
     m->dof_armature[k] = 0.0;
     m->dof_frictionloss[k] = 0.0;
@@ -286,6 +407,10 @@ PeerRun run_mujoco(const MujocoProblem& problem) {
   if (!data) throw std::runtime_error("MuJoCo peer: mj_makeData failed");
   mjData* d = data.get();
   mj_resetData(m, d);
+  if (floating) {
+    for (int k = 0; k < 7; ++k) d->qpos[base_qadr + k] = problem.initial_base_q[k];
+    for (int k = 0; k < 6; ++k) d->qvel[base_dadr + k] = problem.initial_base_v[k];
+  }
   for (size_t i = 0; i < n; ++i) {
     d->qpos[qadr[i]] = problem.initial_q[i];
     d->qvel[dadr[i]] = problem.initial_v[i];
@@ -300,16 +425,25 @@ PeerRun run_mujoco(const MujocoProblem& problem) {
       << ", h = " << format_number(problem.step)
       << ", contacts, limits, frictionloss and equality constraints (URDF mimic) off, armature 0,"
          " URDF geometry stripped"
-         " (inertias from <inertial>), "
-      << m->nq << " qpos / " << m->nv << " dofs";
+         " (inertias from <inertial>"
+      << (balanced.empty()
+              ? std::string()
+              : "; balanceinertia on, MuJoCo refused the moments of '" + balanced + "' (A + B < C)")
+      << ")" << (floating ? ", free joint on '" + problem.floating_base_link + "'" : std::string())
+      << ", " << m->nq << " qpos / " << m->nv << " dofs";
     run.settings = s.str();
   }
 
+  // stiffsim's order: the floating base is body 0, so its coordinates lead.
+  const int base_nq = floating ? 7 : 0, base_nv = floating ? 6 : 0;
+  const int nq = base_nq + static_cast<int>(n);
   auto record = [&](double t) {
-    Eigen::VectorXd x(2 * n);
+    Eigen::VectorXd x(nq + base_nv + static_cast<int>(n));
+    for (int k = 0; k < base_nq; ++k) x[k] = d->qpos[base_qadr + k];
+    for (int k = 0; k < base_nv; ++k) x[nq + k] = d->qvel[base_dadr + k];
     for (size_t i = 0; i < n; ++i) {
-      x[i] = d->qpos[qadr[i]];
-      x[n + i] = d->qvel[dadr[i]];
+      x[base_nq + i] = d->qpos[qadr[i]];
+      x[nq + base_nv + i] = d->qvel[dadr[i]];
     }
     run.times.push_back(t);
     run.samples.push_back(std::move(x));

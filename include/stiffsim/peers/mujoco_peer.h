@@ -1,9 +1,11 @@
 #pragma once
-// MuJoCo as a peer for articulated chains: it loads the same URDF, with the
-// same joint springs and dampers, gravity, initial joint positions and fixed
-// step, and integrates with its `implicit` or `RK4` integrator. Optional at
-// build time: mujoco_available() is false and run_mujoco() throws without it.
+// MuJoCo as a peer for articulated trees: it loads the same URDF, with the
+// same joint springs and dampers, gravity, initial state and fixed step, on
+// a welded or a floating base, and integrates with its `implicit` or `RK4`
+// integrator. Optional at build time: mujoco_available() is false and
+// run_mujoco() throws without it.
 
+#include <array>
 #include <map>
 #include <string>
 #include <vector>
@@ -14,8 +16,19 @@ namespace stiffsim {
 
 struct MujocoProblem {
   std::string urdf_path;
+  // Empty: the URDF's root link is welded to the world (as load_urdf without
+  // floating_base). Otherwise the root link, which gets a free joint to the
+  // world as load_urdf's "floating_base" (a URDF joint of type floating,
+  // added in memory; MuJoCo makes a free joint of it). Its state is in
+  // stiffsim's floating-joint coordinates, which are MuJoCo's free joint's:
+  // q = (origin in the world, unit quaternion w, x, y, z), v = (velocity of
+  // the origin in the world, angular velocity in the body frame).
+  std::string floating_base_link;
+  std::array<double, 7> initial_base_q{0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0};
+  std::array<double, 6> initial_base_v{};
   // stiffsim's 1-DOF joint names in its coordinate order; samples come back
-  // in this order (q of every joint, then v of every joint).
+  // in stiffsim's order: q (the base's 7, then every joint), then v (the
+  // base's 6, then every joint).
   std::vector<std::string> joints;
   std::vector<double> initial_q, initial_v;  // per joint of `joints`
   std::vector<double> stiffness, rest, damping;  // per joint: total damping (URDF's + scene's)
@@ -27,6 +40,16 @@ struct MujocoProblem {
 };
 
 bool mujoco_available();
+
+class ArticulatedSystem;
+
+// The problem of an exact ArticulatedSystem loaded from `urdf_path`: its
+// floating base (a floating root, if any), 1-DOF joints in coordinate order,
+// springs, total damping, gravity and initial state. Integrator, step, end
+// time and samples are left at their defaults for the caller. Throws
+// std::invalid_argument for what MuJoCo's URDF import cannot represent the
+// same way (planar joints, a floating joint below the root, bushings).
+MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string& urdf_path);
 
 // Runs the problem. Joint limits, contacts and MuJoCo's default armature are
 // switched off so that the model is MODELS.md's; PeerRun::settings states
