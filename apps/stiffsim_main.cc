@@ -168,7 +168,7 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "factorization as the Newton matrix, the reuse ladder), fresh (a new "
                       "Jacobian and factorization every iteration) or recursive (exact "
                       "articulated trees: the articulated-body recursion, O(n) per iteration; "
-                      "auto's choice for VIE on trees of 16 or more joint velocities)")
+                      "auto's choice for VIE on trees of 250 or more joint velocities)")
           ->check(CLI::IsMember(newton_solve_names()))
           ->group(newton);
   run->add_flag("--full-newton", o->full_newton,

@@ -98,6 +98,8 @@ void BM_VieStep(benchmark::State& state) {
 // takes the articulated-body recursion (O(n) per Newton iteration).
 void BM_ExactChainStep(benchmark::State& state) {
   const int links = static_cast<int>(state.range(0));
+  ImplicitSettings implicit;
+  implicit.newton_solve = state.range(1) == 0 ? NewtonSolve::kRecursive : NewtonSolve::kChord;
   ArticulatedOptions o;
   o.initial_q = Eigen::VectorXd::Constant(links, 0.05);
   o.joint_forces.assign(links, JointForce{1e4, 0.0, 0.0});
@@ -105,7 +107,7 @@ void BM_ExactChainStep(benchmark::State& state) {
   IntegratorSettings s;
   s.fixed_step = true;
   s.max_step = 1e-3;
-  VelocityImplicitEuler vie(sys, s, ImplicitSettings{});
+  VelocityImplicitEuler vie(sys, s, implicit);
   vie.initialize(sys.initial_state());
   vie.integrate_to(2e-3);
   const IntegratorStatistics before = vie.statistics();
@@ -120,13 +122,18 @@ void BM_ExactChainStep(benchmark::State& state) {
   state.counters["gmres_per_step"] =
       double(st.krylov_iterations - before.krylov_iterations) / steps;
 }
+// Args: links, assembled (0 the recursion, 1 the chord on the assembled
+// dense matrix: where the two cross is auto's threshold).
 BENCHMARK(BM_ExactChainStep)
-    ->ArgName("links")
-    ->Arg(100)
-    ->Arg(300)
-    ->Arg(1000)
-    ->Arg(3000)
-    ->Arg(10000)
+    ->ArgNames({"links", "assembled"})
+    ->Args({10, 0})->Args({10, 1})
+    ->Args({30, 0})->Args({30, 1})
+    ->Args({60, 0})->Args({60, 1})
+    ->Args({100, 0})->Args({100, 1})
+    ->Args({300, 0})->Args({300, 1})
+    ->Args({1000, 0})->Args({1000, 1})
+    ->Args({3000, 0})
+    ->Args({10000, 0})
     ->Unit(benchmark::kMillisecond);
 
 // Args: links, compliant (0 exact, 1 compliant).

@@ -6,10 +6,10 @@
 // 0.5) rad), everything at rest at t = 0; one run of 1 s per iteration.
 //
 // Time: the wall time of the integration loop per step (setup and model
-// loading are left out on both sides), for stiffsim VIE with `auto` (which
-// takes the articulated-body recursion on these trees of >= 16 velocities)
-// and with `chord` (the assembled dense Newton matrix and the reuse
-// ladder), and for MuJoCo's `implicit` integrator (velocity-implicit in
+// loading are left out on both sides), for stiffsim VIE with `recursive`
+// (the articulated-body recursion) and with `chord` (the assembled dense
+// Newton matrix and the reuse ladder: `auto`'s choice on trees of fewer
+// than 250 velocities, these among them), and for MuJoCo's `implicit` integrator (velocity-implicit in
 // damping and Coriolis terms, joint springs explicit; one linear solve per
 // step). MuJoCo's `Euler` (semi-implicit, damping implicit) is timed beside
 // it: MuJoCo 2.2's implicit step forms a dense nv x nv velocity derivative.
@@ -218,7 +218,7 @@ void register_benchmarks() {
       // One iteration is one run of 1 s (1000 or 100 steps); the reported
       // time is per step, so the iteration count is fixed rather than
       // grown to a minimum time of steps.
-      for (auto [solver, solve] : {std::make_pair("vie-auto", NewtonSolve::kAuto),
+      for (auto [solver, solve] : {std::make_pair("vie-recursive", NewtonSolve::kRecursive),
                                    std::make_pair("vie-chord", NewtonSolve::kChord)}) {
         benchmark::RegisterBenchmark((name + solver).c_str(), BM_VieRobot, robot, h, solve)
             ->UseManualTime()

@@ -81,8 +81,8 @@ TEST(RecursiveNewton, FloatingTreeMatchesTheAssembledNewtonMatrix) {
 }
 
 TEST(RecursiveNewton, AutoTakesItForLargeTreesOnly) {
-  const ArticulatedSystem small(serial_chain(10), sprung(10, 0.05));
-  const ArticulatedSystem large(serial_chain(20), sprung(20, 0.05));
+  const ArticulatedSystem small(serial_chain(100), sprung(100, 0.05));
+  const ArticulatedSystem large(serial_chain(300), sprung(300, 0.05));
   EXPECT_EQ(run_fixed(small, NewtonSolve::kAuto, 1e-3, 2e-3, 1e-3).report.newton_solve, "chord");
   EXPECT_EQ(run_fixed(large, NewtonSolve::kAuto, 1e-3, 2e-3, 1e-3).report.newton_solve,
             "recursive");
