@@ -146,6 +146,20 @@ void expect_sound_dynamics(const ArticulatedSystem& sys, unsigned seed) {
     scale = std::max(scale, column.cwiseAbs().maxCoeff());
   }
   EXPECT_LT(worst, 1e-6 * scale) << "largest entry " << scale;
+
+  // The analytic derivatives (force_jacobians) against the forward-mode
+  // differentiation of F (automatic_force_jacobians), with the inertial term
+  // of an acceleration: both exact, so they agree to rounding.
+  const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(nv, -1.0, 1.5);
+  JacobianRequest request;
+  request.acceleration = a.data();
+  ForceJacobians analytic = sys.jacobian_pattern(), automatic = sys.jacobian_pattern();
+  sys.force_jacobians(0.0, q, v, Eigen::VectorXd(), request, &analytic);
+  sys.automatic_force_jacobians(0.0, q, v, Eigen::VectorXd(), request, &automatic);
+  for (auto m : {&ForceJacobians::dF_dq, &ForceJacobians::dF_dv}) {
+    const Eigen::MatrixXd A(analytic.*m), B(automatic.*m);
+    EXPECT_LE((A - B).cwiseAbs().maxCoeff(), 1e-10 * B.cwiseAbs().maxCoeff());
+  }
 }
 
 TEST(RobotUrdf, ExactSystemsOnAWeldedBaseAreSound) {
