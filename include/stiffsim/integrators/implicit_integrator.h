@@ -347,6 +347,7 @@ class ImplicitIntegrator : public IntegratorBase {
   bool krylov_ = false;
   std::string newton_solve_reason_;
   double last_factorization_seconds_ = 0.0;
+  double last_jacobian_seconds_ = 0.0;  // the last force Jacobian's evaluation
   double krylov_excess_seconds_ = 0.0;
   bool refactor_due_ = false;          // the cost model asks for a factorization
   bool refactor_first_ = false;        // none yet, or one formed for another h
