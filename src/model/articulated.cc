@@ -8,6 +8,7 @@
 #include "stiffsim/error.h"
 #include "stiffsim/linalg/column_colouring.h"
 #include "stiffsim/model/articulated_body_solver.h"
+#include "stiffsim/model/bushing_derivatives.h"
 #include "stiffsim/model/inverse_dynamics.h"
 #include "stiffsim/model/joints.h"
 #include "stiffsim/model/quaternion.h"
@@ -65,21 +66,6 @@ Eigen::Vector3d reference_direction(const Eigen::Vector3d& n) {
   return e1;
 }
 
-struct BushingGeometry {
-  double alpha = 1.0, beta = 0.0;  // P = alpha I + beta n n^T
-  bool tilt_only = true;           // angular: axis alignment (else full lock)
-};
-
-BushingGeometry bushing_geometry(JointType type) {
-  switch (type) {
-    case JointType::kRevolute: return {1.0, 0.0, true};
-    case JointType::kPrismatic: return {1.0, -1.0, false};
-    case JointType::kPlanar: return {0.0, 1.0, true};
-    case JointType::kFloating: break;
-  }
-  return {0.0, 0.0, true};
-}
-
 // The relative state of a bushing's two frames.
 template <typename T>
 struct BushingFrames {
@@ -129,7 +115,7 @@ template <typename T, typename Q, typename V>
 void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::vector<int>& qo,
                         const std::vector<int>& vo, VecX<T>* F) {
   const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, qo, vo);
-  const BushingGeometry g = bushing_geometry(bu.type);
+  const BushingProjector g = bushing_projector(bu.type);
   const Vec3<T>& n = fr.n;
   const Vec3<T> d = fr.b.pose.p - fr.xJ;
   const T nd = n.dot(d);
@@ -193,7 +179,7 @@ void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::ve
 double bushing_energy(const Bushing& bu, const Eigen::VectorXd& q, const Eigen::VectorXd& rest,
                       const std::vector<int>& qo, const std::vector<int>& vo) {
   const BushingFrames<double> fr = bushing_frames<double>(bu, q, rest, qo, vo);
-  const BushingGeometry g = bushing_geometry(bu.type);
+  const BushingProjector g = bushing_projector(bu.type);
   const Eigen::Vector3d d = fr.b.pose.p - fr.xJ;
   const double nd = fr.n.dot(d);
   double e = 0.5 * bu.k_lin * (g.alpha * d.squaredNorm() + g.beta * nd * nd);
@@ -664,7 +650,12 @@ void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const
                                         const ConstVectorRef& z, const JacobianRequest& request,
                                         ForceJacobians* J) const {
   (void)t, (void)z;
-  if (!options_.bushings.empty()) return exact_jacobians(q, v, request.acceleration, J);
+  if (!options_.bushings.empty()) {
+    if (!bushing_derivatives_) bushing_derivatives_ = std::make_unique<BushingDerivatives>(*this);
+    bushing_derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+    J->approximated_terms = 0;
+    return;
+  }
   if (!derivatives_) derivatives_ = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
   derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
   J->approximated_terms = 0;

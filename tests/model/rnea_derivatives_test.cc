@@ -1,7 +1,7 @@
-// The analytic derivatives of the recursive Newton-Euler algorithm against
-// ArticulatedSystem's forward-mode automatic differentiation of the same
-// forces, on every joint type and at random states; and the claim that
-// computing them allocates nothing.
+// The analytic derivatives of the recursive Newton-Euler algorithm and of the
+// compliant formulation's bushings against ArticulatedSystem's forward-mode
+// automatic differentiation of the same forces, on every joint type and at
+// random states; and the claim that computing them allocates nothing.
 
 #include "stiffsim/model/rnea_derivatives.h"
 
@@ -15,6 +15,7 @@
 #include <string>
 
 #include "articulated_fixtures.h"
+#include "stiffsim/model/bushing_derivatives.h"
 #include "stiffsim/model/compliant.h"
 #include "stiffsim/model/urdf.h"
 
@@ -255,6 +256,111 @@ TEST(RneaDerivatives, RejectsAPatternThatIsNotTheTrees) {
                                sys.jacobian_pattern().dF_dv),
                std::invalid_argument);
 }
+
+// --- The compliant formulation: bushings between free bodies. ---
+
+// force_jacobians() (analytic for systems with bushings) against the
+// automatic path, at one state.
+void expect_bushings_match_automatic(const ArticulatedSystem& sys, const RandomState& s,
+                                     bool with_acceleration) {
+  JacobianRequest request;
+  if (with_acceleration) request.acceleration = s.a.data();
+  ForceJacobians analytic = sys.jacobian_pattern(), automatic = sys.jacobian_pattern();
+  sys.force_jacobians(0.0, s.q, s.v, Eigen::VectorXd(), request, &analytic);
+  sys.automatic_force_jacobians(0.0, s.q, s.v, Eigen::VectorXd(), request, &automatic);
+  ASSERT_GT(automatic.dF_dq.coeffs().cwiseAbs().maxCoeff(), 0.0);
+  ASSERT_GT(automatic.dF_dv.coeffs().cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(analytic.approximated_terms, 0);
+  EXPECT_LE(relative_difference(analytic.dF_dq, automatic.dF_dq), kTolerance)
+      << sys.name() << (with_acceleration ? " with" : " without") << " acceleration";
+  EXPECT_LE(relative_difference(analytic.dF_dv, automatic.dF_dv), kTolerance)
+      << sys.name() << (with_acceleration ? " with" : " without") << " acceleration";
+}
+
+void expect_bushings_match_automatic_everywhere(const ArticulatedSystem& sys, unsigned seed) {
+  for (double norm : {1.0, 0.97, 1.04}) {
+    for (bool with_acceleration : {false, true}) {
+      expect_bushings_match_automatic(sys, random_state(sys, seed++, norm), with_acceleration);
+    }
+  }
+}
+
+// Soft enough that no one term (linear, angular, joint spring) hides the
+// others' errors in the relative difference.
+constexpr BushingParameters kSoftBushings{1e3, 2.0, 1e2, 0.3};
+
+TEST(BushingDerivatives, CompliantChainsMatchAutomaticDifferentiation) {
+  // Revolute bushings, the first to the world; joint springs and dampers on
+  // the atan2 angle.
+  for (int links : {1, 2, 10}) {
+    const RigidTree tree = make_chain_tree(links);
+    expect_bushings_match_automatic_everywhere(
+        *make_compliant(tree, with_springs(tree), kSoftBushings), 900u + links);
+  }
+  // Without joint forces (the joint spring's branch is skipped) and with the
+  // default, stiff bushings.
+  expect_bushings_match_automatic_everywhere(
+      *make_compliant(make_chain_tree(6), {}, BushingParameters{}), 920u);
+}
+
+TEST(BushingDerivatives, RevolutePrismaticAndPlanarBushingsMatch) {
+  // branched_tree: revolute, prismatic (with its spring on the offset) and
+  // planar joints, rotated placements, off-centre masses; on a floating base
+  // the torso's bushing hangs from a free body instead of the world.
+  for (bool floating_base : {false, true}) {
+    const RigidTree tree = branched_tree(floating_base);
+    ArticulatedOptions o = with_springs(tree);
+    o.gravity = Eigen::Vector3d(1.5, -2.0, -9.0);
+    expect_bushings_match_automatic_everywhere(*make_compliant(tree, o, kSoftBushings),
+                                               floating_base ? 940u : 960u);
+  }
+}
+
+TEST(BushingDerivatives, FreeBodyAmongBushingsMatches) {
+  // mixed_tree's floating joint stays a free body without a bushing; its
+  // children's bushings hang from it; URDF damping on every joint.
+  expect_bushings_match_automatic_everywhere(
+      *make_compliant(mixed_tree(), with_springs(mixed_tree()), kSoftBushings), 980u);
+}
+
+TEST(BushingDerivatives, QuaternionColumnsVanishAlongTheQuaternion) {
+  const auto sys =
+      make_compliant(branched_tree(true), with_springs(branched_tree(true)), kSoftBushings);
+  const RandomState s = random_state(*sys, 990u, 1.1);
+  ForceJacobians J = sys->jacobian_pattern();
+  sys->force_jacobians(0.0, s.q, s.v, Eigen::VectorXd(), JacobianRequest{}, &J);
+  const Eigen::MatrixXd K(J.dF_dq);
+  for (int body = 0; body < static_cast<int>(sys->tree().bodies.size()); ++body) {
+    const int qo = sys->body_q_offset(body) + 3;
+    const Eigen::VectorXd radial = K.middleCols<4>(qo) * s.q.segment<4>(qo);
+    EXPECT_LE(radial.cwiseAbs().maxCoeff(), 1e-12 * K.cwiseAbs().maxCoeff()) << body;
+  }
+}
+
+TEST(BushingDerivatives, RejectsASystemWithoutBushings) {
+  const ArticulatedSystem sys(make_chain_tree(3), {});
+  EXPECT_THROW(BushingDerivatives{sys}, std::invalid_argument);
+}
+
+#ifdef STIFFSIM_COUNTS_ALLOCATIONS
+TEST(BushingDerivatives, ComputeAllocatesNothing) {
+  const RigidTree chain = make_chain_tree(30);
+  const auto chain_sys = make_compliant(chain, with_springs(chain), kSoftBushings);
+  const RigidTree tree = branched_tree(true);
+  const auto tree_sys = make_compliant(tree, with_springs(tree), kSoftBushings);
+  for (const ArticulatedSystem* sys : {chain_sys.get(), tree_sys.get()}) {
+    BushingDerivatives derivatives(*sys);
+    const RandomState s = random_state(*sys, 995u, 1.02);
+    ForceJacobians J = sys->jacobian_pattern();
+    g_allocations = 0;
+    g_count_allocations = true;
+    derivatives.compute(s.q, s.v, nullptr, &J.dF_dq, &J.dF_dv);
+    derivatives.compute(s.q, s.v, s.a.data(), &J.dF_dq, &J.dF_dv);
+    g_count_allocations = false;
+    EXPECT_EQ(g_allocations.load(), 0) << sys->name();
+  }
+}
+#endif
 
 #ifdef STIFFSIM_COUNTS_ALLOCATIONS
 TEST(RneaDerivatives, ComputeAllocatesNothing) {

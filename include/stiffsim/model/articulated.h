@@ -8,10 +8,11 @@
 // - compliant (make_compliant in compliant.h): a forest of free bodies, each
 //   with a floating joint to the world, held together by Bushings; M is block
 //   diagonal and K, D are block tridiagonal for a chain.
-// Both are templated on the scalar: force_jacobians() differentiates F
-// exactly by forward-mode automatic differentiation, seeded by a colouring of
-// the Jacobian pattern, so a chain of free bodies costs a few passes of F
-// whatever its length, and a dense exact tree about (nq + nv) / 16 passes.
+// Both are templated on the scalar: automatic_force_jacobians() differentiates
+// F exactly by forward-mode automatic differentiation, seeded by a colouring
+// of the Jacobian pattern (a chain of free bodies costs a few passes of F
+// whatever its length, a dense exact tree about (nq + nv) / 16 passes), and
+// checks the analytic derivatives of force_jacobians().
 
 #include <Eigen/Core>
 #include <memory>
@@ -28,6 +29,7 @@
 
 namespace stiffsim {
 
+class BushingDerivatives;
 class RneaDerivatives;
 
 // A joint spring tau = -stiffness (q - rest) and viscous damping
@@ -117,9 +119,11 @@ class ArticulatedSystem : public System {
   std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const override;
   const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
   // Exact K and D (complete: nothing dropped; request.acceleration
-  // honoured): analytic derivatives of the recursive Newton-Euler algorithm
+  // honoured), analytic: the recursive Newton-Euler derivatives
   // (rnea_derivatives.h) for trees without bushings, O(n d); with bushings
-  // the seeded forward-mode differentiation of automatic_force_jacobians.
+  // theirs and the free bodies' (bushing_derivatives.h), O(n).
+  // automatic_force_jacobians differentiates the same F by seeded forward
+  // mode and checks both.
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
@@ -194,6 +198,7 @@ class ArticulatedSystem : public System {
   struct DualWorkspace;
   mutable std::unique_ptr<DualWorkspace> dual_;
   mutable std::unique_ptr<RneaDerivatives> derivatives_;  // made on first use
+  mutable std::unique_ptr<BushingDerivatives> bushing_derivatives_;  // made on first use
 
  public:
   ~ArticulatedSystem() override;
