@@ -2,8 +2,9 @@
 // composite rigid body algorithm, the exact K and D by seeded forward-mode
 // differentiation, for chains in reduced coordinates (dense) and as free
 // bodies with bushings (sparse), and one VIE step of each; and the exact
-// chain's K and D by the analytic Newton-Euler derivatives against the
-// automatic differentiation they replace.
+// chain's K and D by the analytic Newton-Euler derivatives, and the compliant
+// chain's by the analytic bushing derivatives, against the automatic
+// differentiation they replace.
 //
 //   build/bench/articulated_bench --benchmark_repetitions=5
 //     --benchmark_report_aggregates_only=true
@@ -82,6 +83,33 @@ void BM_ExactJacobians(benchmark::State& state) {
   }
 }
 
+// Compliant chain (free bodies and bushings) with joint springs and dampers,
+// moving, with the acceleration term: every term of K and D is nonzero.
+void BM_CompliantJacobians(benchmark::State& state) {
+  const int links = static_cast<int>(state.range(0));
+  const bool analytic = state.range(1) != 0;
+  ArticulatedOptions o;
+  o.initial_q = Eigen::VectorXd::LinSpaced(links, 0.1, 0.4);
+  o.initial_v = Eigen::VectorXd::LinSpaced(links, -1.0, 1.0);
+  o.joint_forces.assign(links, JointForce{10.0, 0.0, 0.1});
+  const auto sys = make_compliant(make_chain_tree(links), o, BushingParameters{});
+  const State x = sys->initial_state();
+  const Dimensions d = sys->dimensions();
+  const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(d.nv, 2.0, -3.0);
+  ForceJacobians J = sys->jacobian_pattern();
+  JacobianRequest request;
+  request.acceleration = a.data();
+  for (auto _ : state) {
+    if (analytic) {
+      sys->force_jacobians(0.0, x.q(d), x.v(d), x.z(d), request, &J);
+    } else {
+      sys->automatic_force_jacobians(0.0, x.q(d), x.v(d), x.z(d), request, &J);
+    }
+    benchmark::DoNotOptimize(J.dF_dq.valuePtr());
+    benchmark::DoNotOptimize(J.dF_dv.valuePtr());
+  }
+}
+
 void BM_VieStep(benchmark::State& state) {
   const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
   IntegratorSettings s;
@@ -144,6 +172,11 @@ BENCHMARK(BM_Jacobians)->Args({10, 0})->Args({100, 0})->Args({100, 1})->Args({10
 BENCHMARK(BM_ExactJacobians)
     ->ArgNames({"links", "analytic"})
     ->ArgsProduct({{10, 100, 1000}, {0, 1}})
+    ->Unit(benchmark::kMillisecond);
+// Args: links, analytic (0 automatic differentiation, 1 analytic).
+BENCHMARK(BM_CompliantJacobians)
+    ->ArgNames({"links", "analytic"})
+    ->ArgsProduct({{100, 1000}, {0, 1}})
     ->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VieStep)->Args({10, 0})->Args({100, 1})->Args({1000, 1})->Unit(benchmark::kMillisecond);
 
