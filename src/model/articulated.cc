@@ -3,7 +3,6 @@
 #include <unsupported/Eigen/AutoDiff>
 #include <cmath>
 #include <sstream>
-#include <type_traits>
 
 #include "stiffsim/error.h"
 #include "stiffsim/linalg/column_colouring.h"
@@ -213,6 +212,19 @@ struct ArticulatedSystem::DualWorkspace {
 
 ArticulatedSystem::~ArticulatedSystem() = default;
 
+std::vector<SpatialInertia> body_inertias(const RigidTree& tree) {
+  std::vector<SpatialInertia> out;
+  out.reserve(tree.bodies.size());
+  for (const TreeBody& b : tree.bodies) {
+    SpatialInertia I;
+    I.mass = b.inertia.mass;
+    I.com = b.inertia.com;
+    I.inertia_com = b.inertia.inertia;
+    out.push_back(I);
+  }
+  return out;
+}
+
 ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     : options_(std::move(options)) {
   model_.tree = std::move(tree);
@@ -229,12 +241,8 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     dims_.nq += joint_nq(b.type);
     dims_.nv += joint_nv(b.type);
     model_.has_floating |= b.type == JointType::kFloating;
-    SpatialInertia I;
-    I.mass = b.inertia.mass;
-    I.com = b.inertia.com;
-    I.inertia_com = b.inertia.inertia;
-    model_.inertia.push_back(I);
   }
+  model_.inertia = body_inertias(model_.tree);
   if (!options_.joint_forces.empty() && static_cast<int>(options_.joint_forces.size()) != nb) {
     throw InputError(w + ": joint forces given for " + std::to_string(options_.joint_forces.size()) +
                      " joints; expected " + std::to_string(nb));
@@ -528,7 +536,8 @@ void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) co
   std::vector<MotionSubspace<double>>& S = subspace_;
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model_.tree.bodies[i];
-    const JointMotion<double> jm = joint_motion<double>(b, q.segment(model_.q_offset[i], joint_nq(b.type)));
+    const JointMotion<double> jm =
+        body_joint_motion<double>(model_, i, q.segment(model_.q_offset[i], joint_nq(b.type)));
     S[i] = jm.S;
     X[i] = motion_transform_matrix(jm.pose);
     Ic[i] = model_.inertia_matrix[i];
@@ -565,21 +574,6 @@ void ArticulatedSystem::generalized_forces(const Positions& q, const Velocities&
   inverse_dynamics<T>(model_, q, v, acceleration, data);
   for (const Bushing& bu : options_.bushings) {
     add_bushing_forces<T>(bu, q, v, model_.q_offset, model_.v_offset, &data->F);
-  }
-}
-
-template <typename T>
-void ArticulatedSystem::evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
-                                        const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
-                                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F,
-                                        const double* acceleration) const {
-  if constexpr (std::is_same_v<T, double>) {
-    generalized_forces<double>(q, v, acceleration, data_.get());
-    *F = data_->F;
-  } else {
-    ArticulatedData<T> data(model_);
-    generalized_forces<T>(q, v, acceleration, &data);
-    *F = data.F;
   }
 }
 
@@ -744,8 +738,5 @@ double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) co
   if (bu.type == JointType::kPrismatic) return fr.n.dot(fr.b.pose.p - fr.xJ);
   return bushing_angle<double>(bu, fr, nullptr);
 }
-
-template void ArticulatedSystem::evaluate_forces<double>(const Eigen::VectorXd&, const Eigen::VectorXd&,
-                                                         Eigen::VectorXd*, const double*) const;
 
 }  // namespace stiffsim

@@ -31,7 +31,7 @@ bool ArticulatedBodySolver::factor(const ConstVectorRef& q, double h) {
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model_.tree.bodies[i];
     const JointMotion<double> jm =
-        joint_motion<double>(b, q.segment(model_.q_offset[i], joint_nq(b.type)));
+        body_joint_motion<double>(model_, i, q.segment(model_.q_offset[i], joint_nq(b.type)));
     S_[i] = jm.S;
     X_[i] = motion_transform_matrix(jm.pose);
     IA_[i] = model_.inertia_matrix[i];

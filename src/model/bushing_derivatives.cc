@@ -85,7 +85,7 @@ BushingDerivatives::BushingDerivatives(const ArticulatedSystem& system)
                                system.dimensions().nq, true)),
       forest_D_(forest_pattern(system.tree(), q_offset_, v_offset_, system.dimensions().nv,
                                system.dimensions().nq, false)),
-      forest_(system.tree(), body_inertias(system.tree()), system.options().gravity,
+      forest_(system.tree(), system.model().inertia, system.options().gravity,
               system.options().joint_forces, forest_K_, forest_D_) {
   if (bushings_.empty()) {
     throw std::invalid_argument("BushingDerivatives: '" + system.name() + "' has no bushings");

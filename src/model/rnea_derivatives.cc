@@ -59,19 +59,6 @@ int translation_coordinates(JointType type) {
 
 }  // namespace
 
-std::vector<SpatialInertia> body_inertias(const RigidTree& tree) {
-  std::vector<SpatialInertia> out;
-  out.reserve(tree.bodies.size());
-  for (const TreeBody& b : tree.bodies) {
-    SpatialInertia I;
-    I.mass = b.inertia.mass;
-    I.com = b.inertia.com;
-    I.inertia_com = b.inertia.inertia;
-    out.push_back(I);
-  }
-  return out;
-}
-
 RneaDerivatives::RneaDerivatives(const RigidTree& tree, std::vector<SpatialInertia> inertias,
                                  const Eigen::Vector3d& gravity,
                                  const std::vector<JointForce>& joint_forces,
@@ -370,7 +357,7 @@ RneaDerivatives make_rnea_derivatives(const ArticulatedSystem& system) {
                                 "' has bushings (compliant formulation)");
   }
   const ForceJacobians& pattern = system.jacobian_pattern();
-  return RneaDerivatives(system.tree(), body_inertias(system.tree()), o.gravity, o.joint_forces,
+  return RneaDerivatives(system.tree(), system.model().inertia, o.gravity, o.joint_forces,
                          pattern.dF_dq, pattern.dF_dv);
 }
 

@@ -93,6 +93,7 @@ class ArticulatedSystem : public System {
  public:
   // Validates the tree and options; throws InputError naming the component.
   ArticulatedSystem(RigidTree tree, ArticulatedOptions options);
+  ~ArticulatedSystem() override;
 
   Dimensions dimensions() const override { return dims_; }
   Capabilities capabilities() const override;
@@ -154,13 +155,6 @@ class ArticulatedSystem : public System {
   // Passes of F per Jacobian (colours / lanes, rounded up).
   int jacobian_passes() const { return patterns().jacobian_passes; }
 
-  // F(q, v), or F - M(q) a with joint accelerations `acceleration` (nv
-  // values) when it is not null.
-  template <typename T>
-  void evaluate_forces(const Eigen::Matrix<T, Eigen::Dynamic, 1>& q,
-                       const Eigen::Matrix<T, Eigen::Dynamic, 1>& v,
-                       Eigen::Matrix<T, Eigen::Dynamic, 1>* F, const double* acceleration) const;
-
  private:
   // F (or F - M a) into data->F: the inverse dynamics and the bushings.
   template <typename T, typename Positions, typename Velocities>
@@ -199,9 +193,6 @@ class ArticulatedSystem : public System {
   mutable std::unique_ptr<DualWorkspace> dual_;
   mutable std::unique_ptr<RneaDerivatives> derivatives_;  // made on first use
   mutable std::unique_ptr<BushingDerivatives> bushing_derivatives_;  // made on first use
-
- public:
-  ~ArticulatedSystem() override;
 };
 
 }  // namespace stiffsim

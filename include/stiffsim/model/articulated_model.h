@@ -10,6 +10,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "stiffsim/model/joints.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
 
@@ -35,5 +36,30 @@ struct ArticulatedModel {
 
   int bodies() const { return static_cast<int>(tree.bodies.size()); }
 };
+
+// The spatial inertia of every body of `tree` in its own frame.
+std::vector<SpatialInertia> body_inertias(const RigidTree& tree);
+
+// joint_motion() of body i, a revolute joint's pose from placement_K and
+// placement_K2 (two scaled 3x3 sums instead of the Rodrigues products,
+// about a third of an inverse-dynamics pass): what every recursion on the
+// model (inverse dynamics, the composite and articulated-body algorithms)
+// calls. `q` holds the body's own joint positions.
+template <typename T, typename Positions>
+JointMotion<T> body_joint_motion(const ArticulatedModel& model, int i, const Positions& q) {
+  const TreeBody& b = model.tree.bodies[i];
+  if (b.type != JointType::kRevolute) return joint_motion<T>(b, q);
+  using std::cos;
+  using std::sin;
+  const T angle = T(q[0]);
+  const T s = sin(angle), c1 = T(1.0) - cos(angle);
+  JointMotion<T> out;
+  out.pose.R = b.placement.linear().cast<T>() + s * model.placement_K[i].cast<T>() +
+               c1 * model.placement_K2[i].cast<T>();
+  out.pose.p = b.placement.translation().cast<T>();
+  out.S.setZero(6, 1);
+  out.S.col(0).template head<3>() = b.axis.cast<T>();
+  return out;
+}
 
 }  // namespace stiffsim

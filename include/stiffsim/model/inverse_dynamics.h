@@ -30,23 +30,10 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model.tree.bodies[i];
     const int nv = joint_nv(b.type);
-    if (b.type == JointType::kRevolute) {
-      // joint_motion() without its Rodrigues products (see
-      // ArticulatedModel::placement_K): the common joint, a third of the pass.
-      using std::cos;
-      using std::sin;
-      const T angle = T(q[model.q_offset[i]]);
-      const T s = sin(angle), c1 = T(1.0) - cos(angle);
-      d.pose[i].R = b.placement.linear().cast<T>() + s * model.placement_K[i].cast<T>() +
-                    c1 * model.placement_K2[i].cast<T>();
-      d.pose[i].p = b.placement.translation().cast<T>();
-      d.S[i].setZero(6, 1);
-      d.S[i].col(0).template head<3>() = b.axis.cast<T>();
-    } else {
-      const JointMotion<T> jm = joint_motion<T>(b, q.segment(model.q_offset[i], joint_nq(b.type)));
-      d.pose[i] = jm.pose;
-      d.S[i] = jm.S;
-    }
+    const JointMotion<T> jm =
+        body_joint_motion<T>(model, i, q.segment(model.q_offset[i], joint_nq(b.type)));
+    d.pose[i] = jm.pose;
+    d.S[i] = jm.S;
     const MotionSubspace<T>& S = d.S[i];
     Vec6<T> vJ, cJ;
     if (nv == 1) {

@@ -28,15 +28,12 @@
 
 #include "stiffsim/linalg/sparse_pattern.h"
 #include "stiffsim/model/articulated.h"
+#include "stiffsim/model/articulated_model.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
-
-// The spatial inertia of every body of `tree` in its own frame, as
-// ArticulatedSystem uses them.
-std::vector<SpatialInertia> body_inertias(const RigidTree& tree);
 
 class RneaDerivatives {
  public:
