@@ -72,6 +72,7 @@ std::vector<std::string> component_keys(const std::string& type) {
             "joint_stiffness",
             "joint_rest",
             "joint_damping",
+            "drives",
             "bushing"};
   }
   return {"name", "type"};
@@ -655,6 +656,83 @@ void read_joint_values(const Section& c, const YAML::Node& value, const std::str
     out[k] = c.number_value(value[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
 }
 
+// A prescribed path: a number (constant), {keyframes: [[t, value], ...]}
+// or {sinusoid: {offset, amplitude, frequency, phase}}.
+ScalarPath read_path(const Section& c, const YAML::Node& n, const std::string& what) {
+  if (n.IsScalar()) return ScalarPath::constant(c.number_value(n, what, Range::kFinite));
+  const Section p(c.doc(), n, c.context(), what + ".", {"keyframes", "sinusoid"});
+  if (p.has("keyframes") == p.has("sinusoid")) {
+    p.fail(n, what + " must be a number or a map with one of keyframes, sinusoid");
+  }
+  if (p.has("sinusoid")) {
+    const Section s(c.doc(), p.get("sinusoid"), c.context(), what + ".sinusoid.",
+                    {"offset", "amplitude", "frequency", "phase"});
+    return ScalarPath::sinusoid(s.number_or("offset", Range::kFinite, 0.0),
+                                s.number("amplitude", Range::kFinite),
+                                s.number("frequency", Range::kNonNegative),
+                                s.number_or("phase", Range::kFinite, 0.0), what);
+  }
+  const YAML::Node keys = p.get("keyframes");
+  const std::string label = what + ".keyframes";
+  if (!keys.IsSequence() || keys.size() == 0) {
+    p.fail(keys, label + " must be a non-empty list of [t, value] pairs, got " + node_kind(keys));
+  }
+  std::vector<double> times, values;
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const YAML::Node& key = keys[k];
+    const std::string item = label + "[" + std::to_string(k) + "]";
+    if (!key.IsSequence() || key.size() != 2) {
+      p.fail(key, item + " must be a pair [t, value], got " + node_kind(key));
+    }
+    times.push_back(p.number_value(key[0], item + ".t", Range::kFinite));
+    values.push_back(p.number_value(key[1], item + ".value", Range::kFinite));
+    if (k > 0 && !(times[k] > times[k - 1])) {
+      p.fail(key[0], item + ": keyframe times must increase, got t = " + key[0].Scalar() +
+                         " after t = " + keys[k - 1][0].Scalar());
+    }
+  }
+  return ScalarPath::keyframes(std::move(times), std::move(values), label);
+}
+
+// `drives`: a list of {joint, kp, kd, target} (JointDrive).
+std::vector<JointDrive> read_drives(const Section& c, const RigidTree& tree) {
+  std::vector<JointDrive> drives;
+  if (!c.has("drives")) return drives;
+  const YAML::Node list = c.get("drives");
+  if (!list.IsSequence()) {
+    c.fail(list, "drives must be a list of {joint, kp, kd, target}, got " + node_kind(list));
+  }
+  for (std::size_t k = 0; k < list.size(); ++k) {
+    const std::string what = "drives[" + std::to_string(k) + "]";
+    const Section d(c.doc(), list[k], c.context(), what + ".", {"joint", "kp", "kd", "target"});
+    const YAML::Node joint = d.require("joint");
+    std::size_t i = 0;
+    while (i < tree.bodies.size() && tree.bodies[i].joint != joint.Scalar()) ++i;
+    if (i == tree.bodies.size()) {
+      d.fail(joint, "unknown joint '" + joint.Scalar() + "' in " + what +
+                        " (not a moving joint of " + tree.file +
+                        "; fixed joints are welded and take no drive)");
+    }
+    if (joint_nv(tree.bodies[i].type) != 1) {
+      d.fail(joint, what + ": joint '" + joint.Scalar() + "' is " +
+                        joint_type_name(tree.bodies[i].type) +
+                        "; drives act on revolute and prismatic joints");
+    }
+    for (const JointDrive& other : drives) {
+      if (other.body == static_cast<int>(i)) {
+        d.fail(joint, what + ": joint '" + joint.Scalar() + "' already has a drive");
+      }
+    }
+    JointDrive drive;
+    drive.body = static_cast<int>(i);
+    drive.kp = d.number("kp", Range::kNonNegative);
+    drive.kd = d.number_or("kd", Range::kNonNegative, 0.0);
+    drive.target = read_path(d, d.require("target"), what + ".target");
+    drives.push_back(std::move(drive));
+  }
+  return drives;
+}
+
 std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
                                    const Eigen::Vector3d& g, const std::filesystem::path& base_dir,
                                    std::vector<std::string>* notes) {
@@ -725,12 +803,17 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
       }
     }
   }
+  o.drives = read_drives(c, tree);
   if (formulation == "exact") {
     if (c.has("bushing"))
       c.fail(c.get("bushing"), "bushing applies to formulation: compliant only");
     return with_location(c, name, [&] {
       return std::make_unique<ArticulatedSystem>(std::move(tree), std::move(o));
     });
+  }
+  if (!o.drives.empty()) {
+    c.fail(c.get("drives"), "drives need formulation: exact (the compliant formulation's joints "
+                            "are bushings)");
   }
   BushingParameters bp;
   if (c.has("bushing")) {

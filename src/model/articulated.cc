@@ -260,6 +260,39 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
                        "; joint springs and dampers apply to 1-DOF joints only");
     }
   }
+  std::vector<bool> driven(nb, false);
+  for (const JointDrive& dr : options_.drives) {
+    if (dr.body < 0 || dr.body >= nb) {
+      throw InputError(w + ": a drive names body " + std::to_string(dr.body) + " of " +
+                       std::to_string(nb));
+    }
+    const TreeBody& b = model_.tree.bodies[dr.body];
+    if (!options_.bushings.empty()) {
+      throw InputError(w + ": joint '" + b.joint +
+                       "': drives need the exact formulation (formulation: exact)");
+    }
+    if (joint_nv(b.type) != 1) {
+      throw InputError(w + ": joint '" + b.joint + "' is " + joint_type_name(b.type) +
+                       "; drives act on revolute and prismatic joints");
+    }
+    if (!std::isfinite(dr.kp) || !std::isfinite(dr.kd) || dr.kp < 0.0 || dr.kd < 0.0) {
+      throw InputError(w + ": joint '" + b.joint + "': drive gains kp and kd must be finite and >= 0");
+    }
+    if (driven[dr.body]) throw InputError(w + ": joint '" + b.joint + "' has two drives");
+    driven[dr.body] = true;
+  }
+  // A spring k (q - rest) and a drive kp (q - p(t)) are one spring of
+  // stiffness k + kp about k rest / (k + kp) plus the torque kp p(t): the
+  // model keeps the combined spring, add_drive_torques() the torque.
+  combined_joint_forces_ = options_.joint_forces;
+  if (!options_.drives.empty() && combined_joint_forces_.empty()) combined_joint_forces_.resize(nb);
+  for (const JointDrive& dr : options_.drives) {
+    JointForce& jf = combined_joint_forces_[dr.body];
+    const double k = jf.stiffness + dr.kp;
+    jf.rest = k > 0.0 ? jf.stiffness * jf.rest / k : 0.0;
+    jf.stiffness = k;
+    jf.damping += dr.kd;
+  }
   for (const Bushing& bu : options_.bushings) {
     for (int body : {bu.parent, bu.child}) {
       if (body < -1 || body >= nb || (body >= 0 && !is_free_root(model_.tree.bodies[body])) ||
@@ -313,10 +346,10 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     constant_mass_ &= is_free_root(b) && b.inertia.com.isZero(0.0);
     if (joint_nv(b.type) != 1) continue;
     model_.damping[i] = b.damping;
-    if (options_.joint_forces.empty()) continue;
-    model_.damping[i] += options_.joint_forces[i].damping;
-    model_.stiffness[i] = options_.joint_forces[i].stiffness;
-    model_.rest[i] = options_.joint_forces[i].rest;
+    if (combined_joint_forces_.empty()) continue;
+    model_.damping[i] += combined_joint_forces_[i].damping;
+    model_.stiffness[i] = combined_joint_forces_[i].stiffness;
+    model_.rest[i] = combined_joint_forces_[i].rest;
   }
   data_ = std::make_unique<ArticulatedData<double>>(model_);
   acceleration_.resize(dims_.nv);
@@ -433,7 +466,8 @@ Capabilities ArticulatedSystem::capabilities() const {
   c.analytic_jacobians = true;
   c.automatic_jacobians = true;
   c.has_energy = true;
-  c.passive = true;
+  // A drive with a moving target does work on the system.
+  c.passive = options_.drives.empty();
   c.constant_mass_matrix = constant_mass_;
   c.momentum_residual = true;
   return c;
@@ -579,18 +613,26 @@ void ArticulatedSystem::generalized_forces(const Positions& q, const Velocities&
 
 void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                const ConstVectorRef& z, VectorRef F) const {
-  (void)t, (void)z;
+  (void)z;
   generalized_forces<double>(q, v, nullptr, data_.get());
   F = data_->F;
+  add_drive_torques(t, F);
+}
+
+void ArticulatedSystem::add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> F) const {
+  for (const JointDrive& dr : options_.drives) {
+    F[model_.v_offset[dr.body]] += dr.kp * dr.target.value(t) + dr.kd * dr.target.rate(t);
+  }
 }
 
 void ArticulatedSystem::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                           const ConstVectorRef& z, const ConstVectorRef& dv,
                                           double h, VectorRef r) const {
   // F - M(q) a at a = dv / h is -(M dv - h F) / h.
-  (void)t, (void)z;
+  (void)z;
   acceleration_ = dv / h;
   generalized_forces<double>(q, v, acceleration_.data(), data_.get());
+  add_drive_torques(t, data_->F);
   r = -h * data_->F;
 }
 
@@ -728,6 +770,12 @@ double ArticulatedSystem::energy(const State& s) const {
     e += 0.5 * jf.stiffness * dq * dq;
   }
   for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, model_.q_offset, model_.v_offset);
+  // A drive stores the energy of its spring about the current target (its
+  // moving target does work, which the system does not conserve).
+  for (const JointDrive& dr : options_.drives) {
+    const double dq = q[model_.q_offset[dr.body]] - dr.target.value(s.t);
+    e += 0.5 * dr.kp * dq * dq;
+  }
   return e;
 }
 

@@ -357,7 +357,8 @@ RneaDerivatives make_rnea_derivatives(const ArticulatedSystem& system) {
                                 "' has bushings (compliant formulation)");
   }
   const ForceJacobians& pattern = system.jacobian_pattern();
-  return RneaDerivatives(system.tree(), system.model().inertia, o.gravity, o.joint_forces,
+  return RneaDerivatives(system.tree(), system.model().inertia, o.gravity,
+                         system.combined_joint_forces(),
                          pattern.dF_dq, pattern.dF_dv);
 }
 

@@ -22,6 +22,7 @@
 
 #include "stiffsim/model/articulated_data.h"
 #include "stiffsim/model/articulated_model.h"
+#include "stiffsim/model/path.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
 #include "stiffsim/structured_newton_matrix.h"
@@ -65,6 +66,18 @@ struct Bushing {
   JointForce joint;  // damping: the URDF's plus the scene's
 };
 
+// A PD drive on a 1-DOF joint of the exact formulation:
+//   tau = kp (p(t) - q) + kd (p'(t) - q_dot),
+// p the target path (path.h), its rate the velocity target. Its stiffness
+// and damping enter K and D (and the articulated-body pivots) like a joint
+// spring's, so the drive is as implicit as the rest of the step; only
+// kp p(t) + kd p'(t), which no state changes, is evaluated explicitly.
+struct JointDrive {
+  int body = 0;  // the driven joint's body in the tree
+  double kp = 0.0, kd = 0.0;
+  ScalarPath target = ScalarPath::constant(0.0);
+};
+
 struct ArticulatedOptions {
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};
   // Per body of the tree (empty: none). Only 1-DOF joints take a spring;
@@ -73,6 +86,8 @@ struct ArticulatedOptions {
   // Compliant formulation only: every body a bushing touches must be a free
   // root (parent -1, floating, identity placement).
   std::vector<Bushing> bushings;
+  // Exact formulation only; at most one per joint.
+  std::vector<JointDrive> drives;
   // The initial state (sizes nq and nv); empty: every joint at 0, identity
   // quaternions, at rest.
   Eigen::VectorXd initial_q, initial_v;
@@ -137,6 +152,13 @@ class ArticulatedSystem : public System {
   const RigidTree& tree() const { return model_.tree; }
   const ArticulatedModel& model() const { return model_; }
   const ArticulatedOptions& options() const { return options_; }
+  // The joint springs and dampers with the drives' kp and kd added (what
+  // the derivatives and the Newton matrix see); empty when options() has
+  // none and there are no drives.
+  const std::vector<JointForce>& combined_joint_forces() const { return combined_joint_forces_; }
+  // The drives' state-independent torques kp p(t) + kd p'(t) added into F.
+  // energy() counts each drive's spring about its target at s.t.
+  void add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> F) const;
   int body_q_offset(int body) const { return model_.q_offset[body]; }
   int body_v_offset(int body) const { return model_.v_offset[body]; }
   // Poses of every body in the world.
@@ -176,6 +198,7 @@ class ArticulatedSystem : public System {
 
   ArticulatedModel model_;
   ArticulatedOptions options_;
+  std::vector<JointForce> combined_joint_forces_;
   Dimensions dims_;
   SparseMatrix velocity_map_pattern_;
   bool constant_mass_ = false;
