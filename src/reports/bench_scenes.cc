@@ -67,6 +67,19 @@ BenchScene chain_scene(int links, double angle, double joint_stiffness, double t
   return s;
 }
 
+BenchScene driven_chain_scene(int links, double target, double kp, double kd, double t_final) {
+  ArticulatedOptions o;
+  o.initial_q = Eigen::VectorXd::Constant(links, target);
+  for (int i = 0; i < links; ++i) o.drives.push_back(JointDrive{i, kp, kd, ScalarPath::constant(target)});
+  BenchScene s;
+  s.kind = "driven-chain";
+  s.name = "driven chain " + std::to_string(links);
+  s.scene = single(s.name, std::make_unique<ArticulatedSystem>(make_chain_tree(links), o));
+  s.t_final = t_final;
+  s.step = 5e-3;
+  return s;
+}
+
 BenchScene compliant_chain_scene(int links, double angle, double k_lin, double k_ang, double t_final) {
   ArticulatedOptions o;
   o.initial_q = Eigen::VectorXd::Constant(links, angle);

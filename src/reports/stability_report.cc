@@ -34,6 +34,7 @@ struct Case {
   int mujoco_links = 0;        // > 0: also MuJoCo on chain_N.urdf
   double joint_stiffness = 0;  // for MuJoCo
   double angle = 0.0;
+  double rest = 0.0, damping = 0.0;  // for MuJoCo
 };
 
 struct Outcome {
@@ -155,6 +156,22 @@ int run_stability_report(const ReportOptions& options) {
     c.angle = 0.3;
     cases.push_back(c);
   }
+  // Stiff position drives (a user's report: MuJoCo's position servos, explicit
+  // in their stiffness, diverge on a humanoid at kp = 1e5 and h = 5 ms). A
+  // drive holding a constant target is a joint spring about it; MuJoCo gets
+  // that spring (explicit in its `implicit` integrator) and the drive's kd as
+  // joint damping (implicit there).
+  for (double kp : quick ? std::vector<double>{1e2, 1e5, 1e8}
+                         : std::vector<double>{1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9}) {
+    const double kd = 1.0;
+    Case c{"chain 10 driven to 0.2 rad, kp " + format_number("%.0e", kp) + ", kd 1, h 5e-3",
+           [=] { return driven_chain_scene(10, 0.2, kp, kd, T); }, 5e-3, all};
+    c.mujoco_links = 10;
+    c.joint_stiffness = kp;
+    c.angle = c.rest = 0.2;
+    c.damping = kd;
+    cases.push_back(c);
+  }
   cases.push_back({"free body spinning at 1000 rad/s, h 1e-3", [=] { return spinning_body(1000.0, quick ? 0.1 : 1.0); },
                    1e-3, all});
   const int links = quick ? 200 : 1000;
@@ -183,8 +200,8 @@ int run_stability_report(const ReportOptions& options) {
         p.initial_q.assign(c.mujoco_links, c.angle);
         p.initial_v.assign(c.mujoco_links, 0.0);
         p.stiffness.assign(c.mujoco_links, c.joint_stiffness);
-        p.rest.assign(c.mujoco_links, 0.0);
-        p.damping.assign(c.mujoco_links, 0.0);
+        p.rest.assign(c.mujoco_links, c.rest);
+        p.damping.assign(c.mujoco_links, c.damping);
         p.integrator = integrator;
         p.step = c.h;
         p.t_final = s.t_final;

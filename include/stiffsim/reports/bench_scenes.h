@@ -40,6 +40,8 @@ BenchScene rope_scene_at_shipped_spacing(int nodes, double stretch_k, double t_f
 BenchScene chain_scene(int links, double angle, double joint_stiffness, double t_final);
 // The chain as free bodies and bushings (k_lin, k_ang as given, damped at
 // about 1% of critical on a link).
+// chain_N with a PD drive on every joint holding `target`, started there.
+BenchScene driven_chain_scene(int links, double target, double kp, double kd, double t_final);
 BenchScene compliant_chain_scene(int links, double angle, double k_lin, double k_ang, double t_final);
 
 // Only the scene of a System built elsewhere (stability cases).
