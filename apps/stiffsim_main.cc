@@ -18,11 +18,8 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/integrator_factory.h"
-#include "stiffsim/integrators/simulator.h"
+#include "stiffsim/io/scene_run.h"
 #include "stiffsim/io/scene_yaml.h"
-#include "stiffsim/io/stats_writer.h"
-#include "stiffsim/io/trajectory_writer.h"
-#include "stiffsim/io/vtk_writer.h"
 #include "stiffsim/linalg/blas_threads.h"
 #include "stiffsim/reports/reports.h"
 
@@ -36,7 +33,6 @@ constexpr int kUsageExitCode = 2;  // same as InputError: the user's input is wr
 // stopped early), exiting with 128 + the signal as shells expect.
 volatile std::sig_atomic_t g_stop_signal = 0;
 extern "C" void request_stop(int signal) { g_stop_signal = signal; }
-struct Interrupted {};
 
 std::string join(const std::vector<std::string>& items, const std::string& separator) {
   std::string out;
@@ -209,38 +205,24 @@ void add_run_options(CLI::App* run, RunOptions* o) {
       "--output cloth.csv --stats cloth.json --summary");
 }
 
-// Applies the options the user gave on top of the scene's simulation block.
-void apply_options(const RunOptions& o, SceneConfig* config) {
-  if (o.integrator_option->count() > 0) config->integrator_name = o.integrator;
-  if (o.t_final_option->count() > 0) config->simulation.t_final = o.t_final;
-  if (o.step_option->count() > 0) config->integrator.max_step = o.step;
-  if (o.fixed_step_option->count() > 0) config->integrator.fixed_step = o.fixed_step;
-  if (o.error_estimate_option->count() > 0) config->integrator.error_estimate = o.error_estimate;
-  if (o.accuracy_option->count() > 0) config->integrator.accuracy = o.accuracy;
-  if (o.sample_period_option->count() > 0) config->simulation.sample_period = o.sample_period;
-  if (o.jacobian_option->count() > 0) {
-    config->implicit.jacobian = parse_jacobian_scheme(o.jacobian);
-  }
-  if (o.linear_solver_option->count() > 0) {
-    config->implicit.linear_solver = parse_linear_solver_kind(o.linear_solver);
-  }
-  if (o.newton_form_option->count() > 0) {
-    config->implicit.newton_form = parse_newton_form(o.newton_form);
-  }
-  if (o.error_estimator_option->count() > 0) {
-    config->implicit.error_estimator = parse_error_estimator(o.error_estimator);
-  }
-  if (o.newton_solve_option->count() > 0) {
-    config->implicit.newton_solve = parse_newton_solve(o.newton_solve);
-  }
-  if (o.full_newton) config->implicit.full_newton = true;
-  if (o.no_reuse) config->implicit.reuse = false;
-  if (config->integrator.min_step > config->integrator.max_step) {
-    char message[160];
-    std::snprintf(message, sizeof(message), "--step %g is below the scene's simulation.min_step %g",
-                  config->integrator.max_step, config->integrator.min_step);
-    throw InputError(message);
-  }
+// The options the user gave, for run_settings() to apply on top of the scene.
+RunOverrides overrides_from(const RunOptions& o) {
+  RunOverrides r;
+  if (o.integrator_option->count() > 0) r.integrator = o.integrator;
+  if (o.t_final_option->count() > 0) r.t_final = o.t_final;
+  if (o.step_option->count() > 0) r.step = o.step;
+  if (o.fixed_step_option->count() > 0) r.fixed_step = o.fixed_step;
+  if (o.error_estimate_option->count() > 0) r.error_estimate = o.error_estimate;
+  if (o.accuracy_option->count() > 0) r.accuracy = o.accuracy;
+  if (o.sample_period_option->count() > 0) r.sample_period = o.sample_period;
+  if (o.jacobian_option->count() > 0) r.jacobian = o.jacobian;
+  if (o.linear_solver_option->count() > 0) r.linear_solver = o.linear_solver;
+  if (o.newton_form_option->count() > 0) r.newton_form = o.newton_form;
+  if (o.error_estimator_option->count() > 0) r.error_estimator = o.error_estimator;
+  if (o.newton_solve_option->count() > 0) r.newton_solve = o.newton_solve;
+  r.full_newton = o.full_newton;
+  r.no_reuse = o.no_reuse;
+  return r;
 }
 
 // A one-line progress bar on stderr, redrawn at most ten times a second so
@@ -325,131 +307,65 @@ void print_summary(const RunSummary& s, const std::string& source) {
 }
 
 int run_command(const RunOptions& options) {
-  SceneConfig config = load_scene(options.scene, options.sets);
-  if (!options.quiet) {
-    for (const std::string& note : config.notes) std::fprintf(stderr, "note: %s\n", note.c_str());
-  }
-  apply_options(options, &config);
-  const Scene& scene = *config.scene;
-  std::unique_ptr<IntegratorBase> integrator =
-      make_integrator(config.integrator_name, scene, config.integrator, config.implicit);
+  SceneRunRequest request;
+  request.scene = options.scene;
+  request.sets = options.sets;
+  request.overrides = overrides_from(options);
+  request.output = options.output;
+  request.stats = options.stats;
+  request.vtk = options.vtk;
 
-  // Writers only now that the scene has loaded: a bad scene leaves no files.
-  // Each reserves a temporary file, so an unwritable path fails before the run.
-  std::unique_ptr<TrajectoryWriter> trajectory;
-  std::unique_ptr<StatsWriter> stats;
-  std::unique_ptr<VtkWriter> vtk;
-  if (!options.output.empty()) {
-    trajectory = std::make_unique<TrajectoryWriter>(options.output, scene);
-  }
-  if (!options.stats.empty()) stats = std::make_unique<StatsWriter>(options.stats);
-  if (!options.vtk.empty()) vtk = std::make_unique<VtkWriter>(options.vtk, scene, config.surfaces);
-
-  RunSummary summary;
-  summary.scene = scene.name();
-  summary.dofs = scene.dimensions();
-  summary.accuracy = config.integrator.accuracy;
-  summary.step = config.integrator.max_step;
-  summary.sample_period = config.simulation.sample_period;
-  summary.t_final = config.simulation.t_final;
-  const State initial = scene.initial_state();
-  summary.energy_start = scene.energy(initial);
-
-  Eigen::VectorXd last_x;
-  const SampleCallback on_sample = [&](double t, const Eigen::VectorXd& x) {
-    if (trajectory) trajectory->write(t, x);
-    if (vtk) vtk->write_frame(t, x);
-    summary.t_reached = t;
-    last_x = x;
-    ++summary.samples;
-    return true;
+  std::unique_ptr<ProgressBar> bar;
+  SceneRunHooks hooks;
+  hooks.on_note = [&](const std::string& note) {
+    if (!options.quiet) std::fprintf(stderr, "note: %s\n", note.c_str());
   };
-  ProgressBar bar(!options.quiet && isatty(STDERR_FILENO), config.simulation.t_final);
-  const ProgressCallback on_progress = [&](double fraction) {
-    bar.update(fraction);
-    if (g_stop_signal != 0) throw Interrupted{};
+  hooks.on_progress = [&](double fraction, double t_final) -> std::string {
+    // The bar starts with the first step: only the loaded scene knows t_final.
+    if (!bar) bar = std::make_unique<ProgressBar>(!options.quiet && isatty(STDERR_FILENO), t_final);
+    bar->update(fraction);
+    if (g_stop_signal == 0) return "";
+    return g_stop_signal == SIGINT ? "SIGINT" : "SIGTERM";
   };
   std::signal(SIGINT, request_stop);
   std::signal(SIGTERM, request_stop);
 
+  const SceneRunResult result = run_scene(request, hooks);
+  if (bar) bar->clear();
+  const RunSummary& summary = result.summary;
   int exit_code = 0;
-  std::string failure;
-  const auto start = std::chrono::steady_clock::now();
-  try {
-    const SimulationResult result =
-        simulate(*integrator, initial, config.simulation, on_sample, on_progress);
-    summary.stopped_early = result.stopped_early;
-    if (result.stopped_early) summary.stop_reason = "stopped by the sample callback";
-  } catch (const Interrupted&) {
-    exit_code = 128 + g_stop_signal;
-    char message[200];
-    std::snprintf(message, sizeof(message), "interrupted by %s at t = %g s (last step h = %g s)",
-                  g_stop_signal == SIGINT ? "SIGINT" : "SIGTERM", integrator->state().t,
-                  integrator->state().t - integrator->previous_time());
-    failure = message;
-  } catch (const IntegrationError& e) {
-    // The integrator's message names the time, the step and the method
-    // (error.h), so it is passed on as is.
-    exit_code = IntegrationError::kExitCode;
-    failure = e.what();
-  } catch (const InputError& e) {
-    exit_code = InputError::kExitCode;
-    failure = e.what();
-  } catch (const std::exception& e) {
-    exit_code = 1;
-    failure = e.what();
-  }
-  summary.wall_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  bar.clear();
-  if (!failure.empty()) {
-    summary.stopped_early = true;
-    summary.stop_reason = failure;
-  }
-  summary.statistics = integrator->statistics();
-  summary.report = integrator->report();
-  if (last_x.size() > 0) summary.energy_end = scene.energy(State(summary.t_reached, last_x));
-
-  // A failed run keeps what it computed, marked as incomplete; if even that
-  // cannot be written, the writers' destructors remove their temporary files.
-  std::vector<std::string> write_errors;
-  const auto finish = [&](auto& writer) {
-    if (!writer) return;
-    try {
-      if (failure.empty()) {
-        writer->finish();
-      } else {
-        writer->finish_incomplete(failure);
-      }
-    } catch (const std::exception& e) {
-      write_errors.push_back(e.what());
-    }
-  };
-  finish(trajectory);
-  finish(vtk);
-  if (stats) {
-    try {
-      stats->write(summary);
-    } catch (const std::exception& e) {
-      write_errors.push_back(e.what());
-    }
+  switch (result.failure) {
+    case SceneRunFailure::kNone:
+      break;
+    case SceneRunFailure::kStopped:
+      exit_code = 128 + g_stop_signal;
+      break;
+    case SceneRunFailure::kIntegration:
+      exit_code = IntegrationError::kExitCode;
+      break;
+    case SceneRunFailure::kInput:
+      exit_code = InputError::kExitCode;
+      break;
+    case SceneRunFailure::kOther:
+      exit_code = 1;
+      break;
   }
 
-  if (options.summary) print_summary(summary, config.source);
-  if (!failure.empty()) {
-    std::fprintf(stderr, "stiffsim: error: %s\n", failure.c_str());
-    if (trajectory && write_errors.empty()) {
-      std::fprintf(stderr, "stiffsim: kept %ld sample(s) up to t = %g in %s\n", trajectory->rows(),
-                   summary.t_reached, trajectory->path().c_str());
+  if (options.summary) print_summary(summary, result.source);
+  if (!result.message.empty()) {
+    std::fprintf(stderr, "stiffsim: error: %s\n", result.message.c_str());
+    if (!options.output.empty() && result.write_errors.empty()) {
+      std::fprintf(stderr, "stiffsim: kept %ld sample(s) up to t = %g in %s\n",
+                   result.trajectory_rows, summary.t_reached, options.output.c_str());
     }
   } else if (!options.quiet && !options.summary) {
     std::fprintf(stderr, "stiffsim: %s: %ld samples to t = %g in %.2f s (%ld steps)\n",
                  summary.scene.c_str(), summary.samples, summary.t_reached, summary.wall_seconds,
                  summary.statistics.steps_taken);
   }
-  for (const std::string& e : write_errors)
+  for (const std::string& e : result.write_errors)
     std::fprintf(stderr, "stiffsim: error: %s\n", e.c_str());
-  if (exit_code == 0 && !write_errors.empty()) exit_code = 1;
+  if (exit_code == 0 && !result.write_errors.empty()) exit_code = 1;
   return exit_code;
 }
 
