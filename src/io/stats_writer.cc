@@ -23,9 +23,9 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // Every field of IntegratorStatistics, by its exact name. A field added to
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
-json statistics_json(const IntegratorStatistics& s) {
+json statistics_object(const IntegratorStatistics& s) {
   static_assert(sizeof(IntegratorStatistics) == 48 * 8,
-                "IntegratorStatistics changed: update statistics_json()");
+                "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
   j["derivative_evaluations"] = s.derivative_evaluations;
@@ -101,6 +101,10 @@ json integrator_json(const IntegratorReport& r) {
 
 }  // namespace
 
+std::string statistics_json(const IntegratorStatistics& statistics) {
+  return statistics_object(statistics).dump();
+}
+
 std::string stats_json(const RunSummary& s) {
   json j;
   j["scene"] = s.scene;
@@ -117,7 +121,7 @@ std::string stats_json(const RunSummary& s) {
                       {"factorization", number(s.statistics.factorization_seconds)},
                       {"solve", number(s.statistics.solve_seconds)},
                       {"derivative", number(s.statistics.derivative_seconds)}};
-  j["statistics"] = statistics_json(s.statistics);
+  j["statistics"] = statistics_object(s.statistics);
   j["skipped"] = s.report.skipped;
   j["energy"] = {{"start", number(s.energy_start)}, {"end", number(s.energy_end)}};
   j["samples"] = s.samples;

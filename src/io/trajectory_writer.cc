@@ -18,24 +18,10 @@ void append_number(double value, std::string* out) {
   out->append(text, result.ptr);
 }
 
-namespace {
-
 // Header fields never need quoting: component names are restricted to
 // letters, digits, '_' and '-' by the scene loader, and generated names use
 // only '/', so a ',' here would be a bug upstream rather than user input.
-void append_names(const std::string& prefix, const std::vector<std::string>& names,
-                  std::string* out) {
-  for (const std::string& name : names) {
-    out->push_back(',');
-    out->append(prefix);
-    out->append(name);
-  }
-}
-
-}  // namespace
-
-TrajectoryWriter::TrajectoryWriter(const std::string& path, const System& system)
-    : path_(path), temp_path_(path + ".tmp") {
+std::vector<std::string> trajectory_columns(const System& system) {
   const Dimensions d = system.dimensions();
   const std::vector<std::string> q = system.position_names();
   const std::vector<std::string> v = system.velocity_names();
@@ -45,15 +31,25 @@ TrajectoryWriter::TrajectoryWriter(const std::string& path, const System& system
     throw std::logic_error("system '" + system.name() +
                            "' reports column names that do not match its dimensions");
   }
-  columns_ = d.nx();
+  std::vector<std::string> columns{"t"};
+  for (const std::string& name : q) columns.push_back("q:" + name);
+  for (const std::string& name : v) columns.push_back("v:" + name);
+  for (const std::string& name : z) columns.push_back("z:" + name);
+  return columns;
+}
+
+TrajectoryWriter::TrajectoryWriter(const std::string& path, const System& system)
+    : path_(path), temp_path_(path + ".tmp") {
+  const std::vector<std::string> columns = trajectory_columns(system);
+  columns_ = static_cast<long>(columns.size()) - 1;
   file_ = std::fopen(temp_path_.c_str(), "wb");
   if (file_ == nullptr) {
     throw InputError(path_ + ": cannot create the trajectory file (" + std::strerror(errno) + ")");
   }
-  buffer_ = "t";
-  append_names("q:", q, &buffer_);
-  append_names("v:", v, &buffer_);
-  append_names("z:", z, &buffer_);
+  for (size_t i = 0; i < columns.size(); ++i) {
+    if (i > 0) buffer_.push_back(',');
+    buffer_.append(columns[i]);
+  }
   buffer_.push_back('\n');
   flush_buffer();
 }

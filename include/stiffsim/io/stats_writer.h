@@ -34,6 +34,9 @@ struct RunSummary {
 
 // The JSON document, pretty-printed.
 std::string stats_json(const RunSummary& summary);
+// Its "statistics" object alone, on one line: every counter of `statistics`
+// under the name it has in the file (for front ends that show them live).
+std::string statistics_json(const IntegratorStatistics& statistics);
 
 // Reserves "<path>.tmp" at construction, so that an unwritable path is an
 // error before the run rather than after it; write() fills it and renames it

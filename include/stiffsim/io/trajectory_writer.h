@@ -12,10 +12,15 @@
 #include <Eigen/Core>
 #include <cstdio>
 #include <string>
+#include <vector>
 
 #include "stiffsim/system.h"
 
 namespace stiffsim {
+
+// The header of the CSV, one name per column: "t", then "q:<name>",
+// "v:<name>" and "z:<name>" in the order of x = [q; v; z].
+std::vector<std::string> trajectory_columns(const System& system);
 
 class TrajectoryWriter {
  public:
