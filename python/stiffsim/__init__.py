@@ -19,6 +19,9 @@ a ValueError, with the CLI's message (file, line and key where known); an
 integration that cannot continue raises stiffsim.NumericalFailure, a
 RuntimeError with the time .t and step .h of the failure. Ctrl-C during
 advance_to() or run() raises KeyboardInterrupt after the step in progress.
+
+Threads: integration releases the GIL, but a scene keeps scratch buffers, so
+step the simulators of one scene from one thread at a time.
 """
 
 import json as _json

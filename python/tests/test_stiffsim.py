@@ -237,3 +237,17 @@ def test_bench_reports_reject_an_unusable_directory(tmp_path):
     blocker.write_text("")
     with pytest.raises(stiffsim.InputError):
         stiffsim.bench.stability(out=blocker / "sub", quick=True)
+
+
+def test_stability_report_table_and_its_claim(tmp_path):
+    # The quick preset (about 20 s on 2 cores): the table of stability.csv
+    # as dicts, and the report's claim for VIE: stable on every case.
+    rows = stiffsim.bench.stability(out=tmp_path, quick=True)
+    assert (tmp_path / "stability.csv").exists() and (tmp_path / "stability.md").exists()
+    with open(tmp_path / "stability.csv", newline="") as f:
+        assert list(rows[0]) == next(csv.reader(f))
+    vie = [row for row in rows if row["method"] == "vie"]
+    assert len(vie) >= 5
+    for row in vie:
+        assert row["verdict"] == "stable" and row["pass"] == 1, row
+        assert isinstance(row["steps"], int) and row["steps"] > 0
