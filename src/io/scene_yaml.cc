@@ -54,13 +54,15 @@ std::vector<std::string> component_types() { return {"cloth", "rope", "mesh", "u
 std::vector<std::string> component_keys(const std::string& type) {
   if (type == "cloth") {
     return {"name",    "type",  "nodes", "size",   "total_mass",
-            "stretch", "shear", "bend",  "pinned", "drag"};
+            "stretch", "shear", "bend",  "pinned", "moving_pins", "drag"};
   }
   if (type == "rope") {
-    return {"name", "type", "nodes", "length", "total_mass", "stretch", "bend", "pinned", "drag"};
+    return {"name",   "type", "nodes",  "length",      "total_mass",
+            "stretch", "bend", "pinned", "moving_pins", "drag"};
   }
   if (type == "mesh") {
-    return {"name", "type", "file", "density", "stretch", "bend", "pinned", "drag"};
+    return {"name", "type",   "file",        "density", "stretch",
+            "bend", "pinned", "moving_pins", "drag"};
   }
   if (type == "urdf") {
     return {"name",
@@ -392,6 +394,76 @@ std::vector<int> read_pinned(const Section& component, long node_count) {
   return pinned;
 }
 
+// A prescribed path: a number (constant), {keyframes: [[t, value], ...]}
+// or {sinusoid: {offset, amplitude, frequency, phase}}.
+ScalarPath read_path(const Section& c, const YAML::Node& n, const std::string& what) {
+  if (n.IsScalar()) return ScalarPath::constant(c.number_value(n, what, Range::kFinite));
+  const Section p(c.doc(), n, c.context(), what + ".", {"keyframes", "sinusoid"});
+  if (p.has("keyframes") == p.has("sinusoid")) {
+    p.fail(n, what + " must be a number or a map with one of keyframes, sinusoid");
+  }
+  if (p.has("sinusoid")) {
+    const Section s(c.doc(), p.get("sinusoid"), c.context(), what + ".sinusoid.",
+                    {"offset", "amplitude", "frequency", "phase"});
+    return ScalarPath::sinusoid(s.number_or("offset", Range::kFinite, 0.0),
+                                s.number("amplitude", Range::kFinite),
+                                s.number("frequency", Range::kNonNegative),
+                                s.number_or("phase", Range::kFinite, 0.0), what);
+  }
+  const YAML::Node keys = p.get("keyframes");
+  const std::string label = what + ".keyframes";
+  if (!keys.IsSequence() || keys.size() == 0) {
+    p.fail(keys, label + " must be a non-empty list of [t, value] pairs, got " + node_kind(keys));
+  }
+  std::vector<double> times, values;
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const YAML::Node& key = keys[k];
+    const std::string item = label + "[" + std::to_string(k) + "]";
+    if (!key.IsSequence() || key.size() != 2) {
+      p.fail(key, item + " must be a pair [t, value], got " + node_kind(key));
+    }
+    times.push_back(p.number_value(key[0], item + ".t", Range::kFinite));
+    values.push_back(p.number_value(key[1], item + ".value", Range::kFinite));
+    if (k > 0 && !(times[k] > times[k - 1])) {
+      p.fail(key[0], item + ": keyframe times must increase, got t = " + key[0].Scalar() +
+                         " after t = " + keys[k - 1][0].Scalar());
+    }
+  }
+  return ScalarPath::keyframes(std::move(times), std::move(values), label);
+}
+
+// `moving_pins`: a list of {node, x, y, z}, each axis a path (read_path)
+// of the node's displacement from where the component puts it; a moving
+// node is pinned whether or not `pinned` lists it.
+void read_moving_pins(const Section& c, ParticleDescription* d) {
+  if (!c.has("moving_pins")) return;
+  const YAML::Node list = c.get("moving_pins");
+  if (!list.IsSequence()) {
+    c.fail(list, "moving_pins must be a list of {node, x, y, z}, got " + node_kind(list));
+  }
+  const long nodes = static_cast<long>(d->positions.size());
+  for (std::size_t k = 0; k < list.size(); ++k) {
+    const std::string what = "moving_pins[" + std::to_string(k) + "]";
+    const Section m(c.doc(), list[k], c.context(), what + ".", {"node", "x", "y", "z"});
+    PinMotion motion;
+    const YAML::Node node = m.require("node");
+    motion.node = static_cast<int>(m.integer_value(node, what + ".node", 0, nodes - 1));
+    for (const PinMotion& other : d->pin_motions) {
+      if (other.node == motion.node) {
+        m.fail(node, what + ": node " + std::to_string(motion.node) + " already moves");
+      }
+    }
+    const char* axes[3] = {"x", "y", "z"};
+    for (int a = 0; a < 3; ++a) {
+      if (m.has(axes[a])) motion.displacement[a] = read_path(m, m.get(axes[a]), what + "." + axes[a]);
+    }
+    if (std::find(d->pinned.begin(), d->pinned.end(), motion.node) == d->pinned.end()) {
+      d->pinned.push_back(motion.node);
+    }
+    d->pin_motions.push_back(std::move(motion));
+  }
+}
+
 Eigen::Vector3d read_gravity(const Section& top) {
   if (!top.has("gravity")) return Eigen::Vector3d(0.0, 0.0, -9.81);
   const YAML::Node n = top.list("gravity", 3, "[gx, gy, gz]");
@@ -656,44 +728,6 @@ void read_joint_values(const Section& c, const YAML::Node& value, const std::str
     out[k] = c.number_value(value[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
 }
 
-// A prescribed path: a number (constant), {keyframes: [[t, value], ...]}
-// or {sinusoid: {offset, amplitude, frequency, phase}}.
-ScalarPath read_path(const Section& c, const YAML::Node& n, const std::string& what) {
-  if (n.IsScalar()) return ScalarPath::constant(c.number_value(n, what, Range::kFinite));
-  const Section p(c.doc(), n, c.context(), what + ".", {"keyframes", "sinusoid"});
-  if (p.has("keyframes") == p.has("sinusoid")) {
-    p.fail(n, what + " must be a number or a map with one of keyframes, sinusoid");
-  }
-  if (p.has("sinusoid")) {
-    const Section s(c.doc(), p.get("sinusoid"), c.context(), what + ".sinusoid.",
-                    {"offset", "amplitude", "frequency", "phase"});
-    return ScalarPath::sinusoid(s.number_or("offset", Range::kFinite, 0.0),
-                                s.number("amplitude", Range::kFinite),
-                                s.number("frequency", Range::kNonNegative),
-                                s.number_or("phase", Range::kFinite, 0.0), what);
-  }
-  const YAML::Node keys = p.get("keyframes");
-  const std::string label = what + ".keyframes";
-  if (!keys.IsSequence() || keys.size() == 0) {
-    p.fail(keys, label + " must be a non-empty list of [t, value] pairs, got " + node_kind(keys));
-  }
-  std::vector<double> times, values;
-  for (std::size_t k = 0; k < keys.size(); ++k) {
-    const YAML::Node& key = keys[k];
-    const std::string item = label + "[" + std::to_string(k) + "]";
-    if (!key.IsSequence() || key.size() != 2) {
-      p.fail(key, item + " must be a pair [t, value], got " + node_kind(key));
-    }
-    times.push_back(p.number_value(key[0], item + ".t", Range::kFinite));
-    values.push_back(p.number_value(key[1], item + ".value", Range::kFinite));
-    if (k > 0 && !(times[k] > times[k - 1])) {
-      p.fail(key[0], item + ": keyframe times must increase, got t = " + key[0].Scalar() +
-                         " after t = " + keys[k - 1][0].Scalar());
-    }
-  }
-  return ScalarPath::keyframes(std::move(times), std::move(values), label);
-}
-
 // `drives`: a list of {joint, kp, kd, target} (JointDrive).
 std::vector<JointDrive> read_drives(const Section& c, const RigidTree& tree) {
   std::vector<JointDrive> drives;
@@ -899,6 +933,7 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
     } else {
       built = build_mesh(c, name, gravity, base_dir);
     }
+    read_moving_pins(c, &built.description);
     total_nodes += static_cast<long>(built.description.positions.size());
     if (total_nodes > kMaxTotalNodes) {
       doc.fail(node, context,

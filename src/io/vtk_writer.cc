@@ -151,12 +151,14 @@ void VtkWriter::write_frame(double t, const Eigen::VectorXd& x) {
   append_number(t, &out);
   out += "\nPOINTS " + std::to_string(point_count_) + " double\n";
   for (const Part& part : parts_) {
-    const ParticleDescription& d = part.system->description();
     for (int n = 0; n < part.system->node_count(); ++n) {
       const int dof = part.system->dof_of_node(n);
+      // A pinned node where its motion (if any) puts it at t.
+      const Eigen::Vector3d pin =
+          dof >= 0 ? Eigen::Vector3d::Zero() : part.system->pinned_position(n, t);
       for (int k = 0; k < 3; ++k) {
         if (k > 0) out.push_back(' ');
-        append_number(dof >= 0 ? x[part.q_offset + dof + k] : d.positions[n][k], &out);
+        append_number(dof >= 0 ? x[part.q_offset + dof + k] : pin[k], &out);
       }
       out.push_back('\n');
     }
@@ -168,7 +170,8 @@ void VtkWriter::write_frame(double t, const Eigen::VectorXd& x) {
       const int dof = part.system->dof_of_node(n);
       for (int k = 0; k < 3; ++k) {
         if (k > 0) out.push_back(' ');
-        append_number(dof >= 0 ? x[part.v_offset + dof + k] : 0.0, &out);
+        append_number(dof >= 0 ? x[part.v_offset + dof + k] : part.system->pinned_velocity(n, t)[k],
+                      &out);
       }
       out.push_back('\n');
     }

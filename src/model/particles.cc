@@ -148,6 +148,18 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
       fail(who, "pinned node " + std::to_string(p) + " out of range " + node_range(nodes));
     }
   }
+  motion_of_node_.assign(nodes, -1);
+  for (std::size_t k = 0; k < desc_.pin_motions.size(); ++k) {
+    const int p = desc_.pin_motions[k].node;
+    if (p < 0 || p >= nodes) {
+      fail(who, "moving pin " + std::to_string(p) + " out of range " + node_range(nodes));
+    }
+    if (std::find(desc_.pinned.begin(), desc_.pinned.end(), p) == desc_.pinned.end()) {
+      fail(who, "moving pin " + std::to_string(p) + " is not a pinned node");
+    }
+    if (motion_of_node_[p] >= 0) fail(who, "node " + std::to_string(p) + " has two motions");
+    motion_of_node_[p] = static_cast<int>(k);
+  }
   if (!desc_.gravity.allFinite()) fail(who, "gravity is not finite");
   if (!(std::isfinite(desc_.drag) && desc_.drag >= 0.0)) {
     fail(who, "drag must be finite and >= 0 (got " + str(desc_.drag) + ")");
@@ -225,7 +237,9 @@ Capabilities ParticleSystem::capabilities() const {
   c.analytic_jacobians = true;
   c.automatic_jacobians = true;
   c.has_energy = true;
-  c.passive = true;  // springs and gravity conserve, dampers and drag dissipate
+  // Springs and gravity conserve, dampers and drag dissipate; a moving pin
+  // does work.
+  c.passive = desc_.pin_motions.empty();
   return c;
 }
 
@@ -264,9 +278,39 @@ void ParticleSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const
   std::copy(free_mass_.data(), free_mass_.data() + free_mass_.size(), M->valuePtr());
 }
 
+Eigen::Vector3d ParticleSystem::pinned_position(int node, double t) const {
+  Eigen::Vector3d x = desc_.positions[node];
+  const int m = motion_of_node_[node];
+  if (m >= 0) {
+    for (int k = 0; k < 3; ++k) x[k] += desc_.pin_motions[m].displacement[k].value(t);
+  }
+  return x;
+}
+
+Eigen::Vector3d ParticleSystem::pinned_velocity(int node, double t) const {
+  Eigen::Vector3d v = Eigen::Vector3d::Zero();
+  const int m = motion_of_node_[node];
+  if (m >= 0) {
+    for (int k = 0; k < 3; ++k) v[k] = desc_.pin_motions[m].displacement[k].rate(t);
+  }
+  return v;
+}
+
+Eigen::Vector3d ParticleSystem::node_position(int i, const ConstVectorRef& q, double t) const {
+  const int di = dof_of_node_[i];
+  if (di >= 0) return q.segment<3>(di);
+  return motion_of_node_[i] < 0 ? desc_.positions[i] : pinned_position(i, t);
+}
+
+Eigen::Vector3d ParticleSystem::node_velocity(int i, const ConstVectorRef& v, double t) const {
+  const int di = dof_of_node_[i];
+  if (di >= 0) return v.segment<3>(di);
+  return motion_of_node_[i] < 0 ? Eigen::Vector3d::Zero() : pinned_velocity(i, t);
+}
+
 void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                             const ConstVectorRef& z, VectorRef F) const {
-  (void)t, (void)z;
+  (void)z;
   const double alpha = desc_.drag;
   for (int i = 0; i < node_count(); ++i) {
     const int di = dof_of_node_[i];
@@ -276,12 +320,8 @@ void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVector
   for (const Spring& sp : desc_.springs) {
     const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
     if (da < 0 && db < 0) continue;  // both ends pinned: no force on any DOF
-    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
-    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
-    // Pinned nodes have zero velocity.
-    Eigen::Vector3d vab = Eigen::Vector3d::Zero();
-    if (db >= 0) vab += v.segment<3>(db);
-    if (da >= 0) vab -= v.segment<3>(da);
+    const Eigen::Vector3d xa = node_position(sp.a, q, t), xb = node_position(sp.b, q, t);
+    const Eigen::Vector3d vab = node_velocity(sp.b, v, t) - node_velocity(sp.a, v, t);
     const Eigen::Vector3d fa = spring_force_on_a(sp, xa, xb, vab);
     if (da >= 0) F.segment<3>(da) += fa;
     if (db >= 0) F.segment<3>(db) -= fa;
@@ -301,7 +341,7 @@ void ParticleSystem::check_jacobian_pattern(const ForceJacobians& J, const char*
 void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                      const ConstVectorRef& z, const JacobianRequest& request,
                                      ForceJacobians* J) const {
-  (void)t, (void)z;
+  (void)z;
   check_jacobian_pattern(*J, "force_jacobians");
   set_zero_keep_pattern(&J->dF_dq);
   set_zero_keep_pattern(&J->dF_dv);
@@ -316,9 +356,7 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
     const Spring& sp = desc_.springs[s];
     const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
     if (da < 0 && db < 0) continue;
-    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
-    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
-    const SpringFrame<double> f = spring_frame(xa, xb);
+    const SpringFrame<double> f = spring_frame(node_position(sp.a, q, t), node_position(sp.b, q, t));
 
     // S = df_a/dx_b. The damping force c ((v_b - v_a).u) u also depends on x
     // through u; unless the request is complete that derivative is dropped
@@ -345,9 +383,7 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
       if (request.complete && sp.c != 0.0) {
         // d/dd [c (w.u) u] with w = v_b - v_a and du/dd = P / l,
         // P = I - u u^T: c (u (P w)^T + (w.u) P) / l. Unsymmetric.
-        Eigen::Vector3d w = Eigen::Vector3d::Zero();
-        if (db >= 0) w += v.segment<3>(db);
-        if (da >= 0) w -= v.segment<3>(da);
+        const Eigen::Vector3d w = node_velocity(sp.b, v, t) - node_velocity(sp.a, v, t);
         const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - uut;
         S += (sp.c / f.l) * (f.u * (P * w).transpose() + w.dot(f.u) * P);
       }
@@ -375,7 +411,7 @@ void ParticleSystem::automatic_force_jacobians(double t, const ConstVectorRef& q
                                                const ConstVectorRef& v, const ConstVectorRef& z,
                                                const JacobianRequest& request,
                                                ForceJacobians* J) const {
-  (void)t, (void)z, (void)request;  // exact and complete whatever the request
+  (void)z, (void)request;  // exact and complete whatever the request
   check_jacobian_pattern(*J, "automatic_force_jacobians");
   set_zero_keep_pattern(&J->dF_dq);
   set_zero_keep_pattern(&J->dF_dv);
@@ -391,14 +427,10 @@ void ParticleSystem::automatic_force_jacobians(double t, const ConstVectorRef& q
     const Spring& sp = desc_.springs[s];
     const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
     if (da < 0 && db < 0) continue;
-    const Eigen::Vector3d xa = da >= 0 ? Eigen::Vector3d(q.segment<3>(da)) : desc_.positions[sp.a];
-    const Eigen::Vector3d xb = db >= 0 ? Eigen::Vector3d(q.segment<3>(db)) : desc_.positions[sp.b];
-    // Pinned nodes have zero velocity; their lanes are seeded anyway (uniform
-    // code) and simply never scattered, as their slots are -1.
-    const Eigen::Vector3d va =
-        da >= 0 ? Eigen::Vector3d(v.segment<3>(da)) : Eigen::Vector3d::Zero();
-    const Eigen::Vector3d vb =
-        db >= 0 ? Eigen::Vector3d(v.segment<3>(db)) : Eigen::Vector3d::Zero();
+    const Eigen::Vector3d xa = node_position(sp.a, q, t), xb = node_position(sp.b, q, t);
+    // A pinned node's lanes are seeded anyway (uniform code) and simply
+    // never scattered, as their slots are -1.
+    const Eigen::Vector3d va = node_velocity(sp.a, v, t), vb = node_velocity(sp.b, v, t);
     const Vector3<SpringDual> vab = seeded(vb, kVb) - seeded(va, kVa);
     const Vector3<SpringDual> fa =
         spring_force_on_a<SpringDual>(sp, seeded(xa, kXa), seeded(xb, kXb), vab);
@@ -449,13 +481,11 @@ double ParticleSystem::energy(const State& s) const {
   const Dimensions dims = dimensions();
   const auto q = s.q(dims);
   const auto v = s.v(dims);
-  auto position = [&](int i) -> Eigen::Vector3d {
-    const int di = dof_of_node_[i];
-    return di >= 0 ? Eigen::Vector3d(q.segment<3>(di)) : desc_.positions[i];
-  };
-  // Pinned nodes are included with their fixed positions: a constant offset
-  // that makes this the total energy of every particle, as a physicist would
-  // write it; differences in time are unaffected.
+  auto position = [&](int i) -> Eigen::Vector3d { return node_position(i, q, s.t); };
+  // Pinned nodes are included with their positions at s.t (for a fixed pin
+  // a constant offset that makes this the total energy of every particle, as
+  // a physicist would write it; differences in time are unaffected). A
+  // moving pin's own kinetic energy is left out: no force acts on it.
   double e = 0.0;
   for (int i = 0; i < node_count(); ++i) {
     const int di = dof_of_node_[i];

@@ -427,6 +427,53 @@ TEST(SceneYaml, FileLevelErrors) {
 namespace stiffsim {
 namespace {
 
+TEST(SceneYaml, ShippedRopeShakeMovesItsPinAlongThePath) {
+  // models/rope_shake.yaml: node 0 follows z = 0.15 sin(3 pi t) and the
+  // keyframed sway in y; the first free node, 2 cm away on a k = 1e5
+  // spring, stays within a few millimetres of that distance from it.
+  const SceneConfig config = load_scene(model_path("rope_shake.yaml"));
+  const auto& rope = dynamic_cast<const ParticleSystem&>(config.scene->component(0));
+  ASSERT_EQ(rope.description().pin_motions.size(), 1u);
+  const Eigen::Vector3d start = rope.description().positions[0];
+  for (double t : {0.1, 0.5, 1.5}) {
+    const Eigen::Vector3d expected =
+        start + Eigen::Vector3d(0.0, t <= 1.0 ? 0.1 * t : 0.1 - 0.2 * (t - 1.0),
+                                0.15 * std::sin(2.0 * M_PI * 1.5 * t));
+    EXPECT_LT((rope.pinned_position(0, t) - expected).norm(), 1e-15) << "t = " << t;
+  }
+  auto vie = make_integrator(config.integrator_name, *config.scene, config.integrator,
+                             config.implicit);
+  vie->initialize(config.scene->initial_state());
+  const double spacing = 1.0 / 49.0;
+  for (double t : {0.25, 0.5, 1.0}) {
+    vie->integrate_to(t);
+    const Eigen::Vector3d first = vie->state().x.head<3>();
+    EXPECT_NEAR((first - rope.pinned_position(0, t)).norm(), spacing, 5e-3) << "t = " << t;
+  }
+  EXPECT_FALSE(config.scene->capabilities().passive);
+}
+
+TEST(SceneYaml, MovingPinErrorsNameTheLine) {
+  const std::string base = std::string(kCloth).substr(0, std::string(kCloth).find("simulation:"));
+  const std::string out_of_range =
+      load_error(base + "    moving_pins:\n      - {node: 12, x: 0.1}\nsimulation: {t_final: 1}\n");
+  EXPECT_NE(out_of_range.find("bad.yaml:10:"), std::string::npos) << out_of_range;
+  EXPECT_NE(out_of_range.find("moving_pins[0].node must be at most 11"), std::string::npos)
+      << out_of_range;
+  const std::string order = load_error(
+      base + "    moving_pins:\n      - node: 0\n        z: {keyframes: [[0, 0], [0, 1]]}\n"
+             "simulation: {t_final: 1}\n");
+  EXPECT_NE(order.find("bad.yaml:11:"), std::string::npos) << order;
+  EXPECT_NE(order.find("keyframe times must increase"), std::string::npos) << order;
+  const std::string twice = load_error(
+      base + "    moving_pins:\n      - {node: 0, x: 0.1}\n      - {node: 0, y: 0.1}\n"
+             "simulation: {t_final: 1}\n");
+  EXPECT_NE(twice.find("node 0 already moves"), std::string::npos) << twice;
+  const std::string axis = load_error(
+      base + "    moving_pins:\n      - {node: 0, w: 0.1}\nsimulation: {t_final: 1}\n");
+  EXPECT_NE(axis.find("unknown key 'moving_pins[0].w'"), std::string::npos) << axis;
+}
+
 TEST(SceneYamlUrdf, SeveralUrdfComponentsShareASceneWithTheirOwnColumnsAndSettings) {
   const std::string text = R"(components:
   - name: left

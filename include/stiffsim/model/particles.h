@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/model/path.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
@@ -20,12 +21,22 @@ struct Spring {
   double c = 0.0;            // damping along the axis, N s/m
 };
 
+// A pinned node that moves: its position is its rest position plus the
+// displacement (x(t), y(t), z(t)), its velocity the paths' rates. It stays
+// outside the state, so it follows its path exactly under every method.
+struct PinMotion {
+  int node = 0;  // must also be in ParticleDescription::pinned
+  std::array<ScalarPath, 3> displacement{ScalarPath::constant(0.0), ScalarPath::constant(0.0),
+                                         ScalarPath::constant(0.0)};
+};
+
 struct ParticleDescription {
   std::string name;                        // component name: CSV columns <name>/n<i>/x
   std::vector<Eigen::Vector3d> positions;  // every node, pinned ones included
   std::vector<double> masses;              // every node, > 0
   std::vector<Spring> springs;
   std::vector<int> pinned;  // node indices; not degrees of freedom
+  std::vector<PinMotion> pin_motions;  // pinned nodes that move (at most one each)
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};
   double drag = 0.0;  // alpha: f_i += -alpha m_i v_i
   // Integer lattice coordinates of every node when the nodes sit on a square
@@ -81,13 +92,22 @@ class ParticleSystem : public System {
   int node_count() const { return static_cast<int>(desc_.positions.size()); }
   // DOF index of a node's x coordinate, or -1 if the node is pinned.
   int dof_of_node(int node) const { return dof_of_node_[node]; }
+  // Where a pinned node is at time t, and its velocity.
+  Eigen::Vector3d pinned_position(int node, double t) const;
+  Eigen::Vector3d pinned_velocity(int node, double t) const;
 
  private:
   // Throws std::logic_error unless J has the sizes of jacobian_pattern().
   void check_jacobian_pattern(const ForceJacobians& J, const char* caller) const;
 
   ParticleDescription desc_;
+  // Position and velocity of node i at time t: from q and v for a free node,
+  // from its rest position and motion for a pinned one.
+  Eigen::Vector3d node_position(int i, const ConstVectorRef& q, double t) const;
+  Eigen::Vector3d node_velocity(int i, const ConstVectorRef& v, double t) const;
+
   std::vector<int> dof_of_node_;  // 3*free index or -1
+  std::vector<int> motion_of_node_;  // index into desc_.pin_motions or -1
   int free_nodes_ = 0;
   SparseMatrix mass_pattern_;
   ForceJacobians jacobian_pattern_;
