@@ -1,5 +1,7 @@
 #include "stiffsim/scene.h"
 
+#include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <stdexcept>
@@ -35,8 +37,10 @@ SparseMatrix block_diagonal(const std::vector<std::unique_ptr<System>>& comps,
 
 }  // namespace
 
-Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
-    : name_(std::move(name)), components_(std::move(components)) {
+Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
+             std::vector<Attachment> attachments)
+    : name_(std::move(name)), components_(std::move(components)),
+      attachments_(std::move(attachments)) {
   if (components_.empty()) throw InputError(name_ + ": a scene needs at least one component");
   caps_.identity_velocity_map = caps_.constant_mass_matrix = caps_.diagonal_mass_matrix = true;
   caps_.symmetric_jacobians = caps_.analytic_jacobians = caps_.has_energy = true;
@@ -77,6 +81,130 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components)
                              : std::vector<int>());
     scratch_N_.push_back(own_N ? c.velocity_map_pattern() : SparseMatrix());
   }
+
+  int most_dofs = 0;
+  for (const Attachment& at : attachments_) {
+    const std::string who = name_ + ": attachment '" + at.name + "'";
+    if (!(std::isfinite(at.k) && at.k >= 0.0 && std::isfinite(at.c) && at.c >= 0.0)) {
+      throw InputError(who + ": k and c must be finite and >= 0");
+    }
+    if (at.a.component < 0 && at.b.component < 0) throw InputError(who + ": joins the world to itself");
+    for (const AttachmentPoint* p : {&at.a, &at.b}) {
+      if (p->component >= static_cast<int>(components_.size()) || !p->local.allFinite()) {
+        throw InputError(who + ": no component " + std::to_string(p->component));
+      }
+      if (p->component < 0) continue;
+      const System& s = *components_[p->component];
+      if (s.point_elements() == 0) {
+        throw InputError(who + ": component '" + s.name() +
+                         "' offers no points to attach to (a tree with floating or planar "
+                         "joints, or in the compliant formulation)");
+      }
+      if (p->element < 0 || p->element >= s.point_elements()) {
+        throw InputError(who + ": component '" + s.name() + "' has no point " +
+                         std::to_string(p->element) + " (0.." +
+                         std::to_string(s.point_elements() - 1) + ")");
+      }
+      most_dofs = std::max(most_dofs, s.point_dofs(p->element));
+    }
+  }
+  for (PointKinematics* p : {&point_a_, &point_b_}) {
+    p->dofs.reserve(most_dofs);
+    p->J.reserve(most_dofs);
+    p->axis.reserve(most_dofs);
+  }
+  dp_dot_dq_.reserve(most_dofs);
+}
+
+void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
+                              const ConstVectorRef& v) const {
+  const Attachment& at = attachments_[k];
+  for (auto [p, out] : {std::make_pair(&at.a, &point_a_), std::make_pair(&at.b, &point_b_)}) {
+    if (p->component < 0) {
+      out->p = p->local;
+      out->p_dot.setZero();
+      out->dofs.clear();
+      out->J.clear();
+      out->axis.clear();
+      continue;
+    }
+    const System& s = *components_[p->component];
+    const Dimensions d = s.dimensions();
+    const Dimensions& o = offsets_[p->component];
+    s.point_kinematics(t, p->element, p->local, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), out);
+  }
+}
+
+void Scene::add_attachment_forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                  VectorRef F) const {
+  for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
+    const Attachment& at = attachments_[k];
+    attachment_points(k, t, q, v);
+    // On point a; -f on point b. Generalized forces by virtual work: J^T f.
+    const Eigen::Vector3d f = at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+    const int oa = at.a.component < 0 ? 0 : offsets_[at.a.component].nv;
+    const int ob = at.b.component < 0 ? 0 : offsets_[at.b.component].nv;
+    for (size_t j = 0; j < point_a_.dofs.size(); ++j) F[oa + point_a_.dofs[j]] += point_a_.J[j].dot(f);
+    for (size_t j = 0; j < point_b_.dofs.size(); ++j) F[ob + point_b_.dofs[j]] -= point_b_.J[j].dot(f);
+  }
+}
+
+void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                     bool complete, ForceJacobians* J) const {
+  // First: building the patterns evaluates the points at the initial state.
+  const Patterns& L = patterns();
+  double* K = J->dF_dq.valuePtr();
+  double* D = J->dF_dv.valuePtr();
+  for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
+    const Attachment& at = attachments_[k];
+    attachment_points(k, t, q, v);
+    const Eigen::Vector3d f = at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+    const int na = static_cast<int>(point_a_.dofs.size());
+    const int n = na + static_cast<int>(point_b_.dofs.size());
+    // Entry (i, m) over the dofs of a then b; s = +1 on a's, -1 on b's:
+    //   F_i = s_i J_i . f,  df/dq_m = -s_m (k J_m + c dp_dot/dq_m),
+    //   df/dv_m = -s_m c J_m, and on one point's own dofs the turn of its
+    //   columns, s_i f . dJ_i/dq_m (point_kinematics.h).
+    auto point = [&](int i) -> const PointKinematics& { return i < na ? point_a_ : point_b_; };
+    auto local = [&](int i) { return i < na ? i : i - na; };
+    auto sign = [&](int i) { return i < na ? 1.0 : -1.0; };
+    // dp_dot/dq_m = axis_m x (sum_{j >= m} v_j J_j) + (sum_{j < m} v_j axis_j) x J_m.
+    dp_dot_dq_.resize(n);
+    for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+      const int first = pk == &point_a_ ? 0 : na;
+      const int count = static_cast<int>(pk->dofs.size());
+      const int component = pk == &point_a_ ? at.a.component : at.b.component;
+      const int ov = component < 0 ? 0 : offsets_[component].nv;
+      Eigen::Vector3d below = Eigen::Vector3d::Zero(), above = Eigen::Vector3d::Zero();
+      for (int j = 0; j < count; ++j) below += v[ov + pk->dofs[j]] * pk->J[j];
+      for (int m = 0; m < count; ++m) {
+        dp_dot_dq_[first + m] = pk->axis[m].cross(below) + above.cross(pk->J[m]);
+        below -= v[ov + pk->dofs[m]] * pk->J[m];
+        above += v[ov + pk->dofs[m]] * pk->axis[m];
+      }
+    }
+    const std::vector<int>& sq = L.attachment_q[k];
+    const std::vector<int>& sv = L.attachment_v[k];
+    for (int i = 0; i < n; ++i) {
+      const PointKinematics& pi = point(i);
+      const Eigen::Vector3d& Ji = pi.J[local(i)];
+      for (int m = 0; m < n; ++m) {
+        const PointKinematics& pm = point(m);
+        const Eigen::Vector3d& Jm = pm.J[local(m)];
+        const double s = sign(i) * sign(m);
+        double kq = -at.k * s * Ji.dot(Jm);
+        if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq_[m]);
+        if (&pi == &pm) {
+          const int li = local(i), lm = local(m);
+          const Eigen::Vector3d turn =
+              lm <= li ? pm.axis[lm].cross(Ji) : pi.axis[li].cross(Jm);
+          kq += sign(i) * f.dot(turn);
+        }
+        K[sq[i * n + m]] += kq;
+        D[sv[i * n + m]] += -at.c * s * Ji.dot(Jm);
+      }
+    }
+  }
 }
 
 Scene::Patterns& Scene::patterns() const {
@@ -116,6 +244,44 @@ Scene::Patterns& Scene::patterns() const {
     J0.dfz_dz = jac(&ForceJacobians::dfz_dz, D.nz, D.nz, [](auto& o) {
       return P{o.nz, o.nz};
     });
+    // The attachments' blocks: every pair of the dofs their two points move
+    // with (fixed per attachment: taken at the initial state).
+    std::vector<std::vector<std::pair<int, int>>> rows_cols(attachments_.size());
+    if (!attachments_.empty()) {
+      const State x0 = initial_state();
+      const Dimensions& D0 = dims_;
+      const Eigen::VectorXd q0 = x0.x.head(D0.nq), v0 = x0.x.segment(D0.nq, D0.nv);
+      PatternBuilder bq(D0.nv, D0.nq), bv(D0.nv, D0.nv);
+      bq.add_pattern(J0.dF_dq);
+      bv.add_pattern(J0.dF_dv);
+      for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
+        attachment_points(k, 0.0, q0, v0);
+        std::vector<std::pair<int, int>>& rc = rows_cols[k];  // (v index, q index)
+        for (auto [pk, comp] : {std::make_pair(&point_a_, attachments_[k].a.component),
+                                std::make_pair(&point_b_, attachments_[k].b.component)}) {
+          for (int d : pk->dofs) rc.emplace_back(offsets_[comp].nv + d, offsets_[comp].nq + d);
+        }
+        for (auto [ri, qi] : rc) {
+          for (auto [rm, qm] : rc) {
+            bq.add(ri, qm);
+            bv.add(ri, rm);
+          }
+        }
+      }
+      J0.dF_dq = bq.build();
+      J0.dF_dv = bv.build();
+    }
+    L->attachment_q.resize(attachments_.size());
+    L->attachment_v.resize(attachments_.size());
+    for (size_t k = 0; k < attachments_.size(); ++k) {
+      for (auto [ri, qi] : rows_cols[k]) {
+        (void)qi;
+        for (auto [rm, qm] : rows_cols[k]) {
+          L->attachment_q[k].push_back(slot_of(J0.dF_dq, ri, qm));
+          L->attachment_v[k].push_back(slot_of(J0.dF_dv, ri, rm));
+        }
+      }
+    }
     for (size_t i = 0; i < comps.size(); ++i) {
       const System& c = *comps[i];
       const Dimensions& o = offsets_[i];
@@ -231,6 +397,7 @@ void Scene::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
     components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), z.segment(o.nz, d.nz),
                            F.segment(o.nv, d.nv));
   }
+  if (!attachments_.empty()) add_attachment_forces(t, q, v, F);
 }
 
 void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
@@ -243,10 +410,15 @@ void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVect
                                       z.segment(o.nz, d.nz), dv.segment(o.nv, d.nv), h,
                                       r.segment(o.nv, d.nv));
   }
+  if (attachments_.empty()) return;
+  // r = M dv - h F: the attachments' forces enter with -h.
+  r /= -h;
+  add_attachment_forces(t, q, v, r);
+  r *= -h;
 }
 
 std::unique_ptr<StructuredNewtonMatrix> Scene::make_structured_newton_matrix() const {
-  if (components_.size() != 1) return nullptr;
+  if (components_.size() != 1 || !attachments_.empty()) return nullptr;
   return components_[0]->make_structured_newton_matrix();
 }
 
@@ -265,18 +437,20 @@ void Scene::force_jacobians(double t, const ConstVectorRef& q, const ConstVector
                             const ConstVectorRef& z, const JacobianRequest& request,
                             ForceJacobians* J) const {
   gather_jacobians(t, q, v, z, request, J, &System::force_jacobians);
+  if (!attachments_.empty()) add_attachment_jacobians(t, q, v, request.complete, J);
 }
 
 void Scene::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                       const ConstVectorRef& z, const JacobianRequest& request,
                                       ForceJacobians* J) const {
   gather_jacobians(t, q, v, z, request, J, &System::automatic_force_jacobians);
+  if (!attachments_.empty()) add_attachment_jacobians(t, q, v, true, J);
 }
 
 void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                              const ConstVectorRef& z, const JacobianRequest& request,
                              ForceJacobians* J, JacobianMethod method) const {
-  if (components_.size() == 1) {
+  if (components_.size() == 1 && attachments_.empty()) {
     return ((*components_[0]).*method)(t, q, v, z, request, J);
   }
   for (SparseMatrix* m : {&J->dF_dq, &J->dF_dv, &J->dF_dz, &J->dfz_dq, &J->dfz_dv, &J->dfz_dz}) {
@@ -304,6 +478,8 @@ void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVecto
 }
 
 std::vector<int> Scene::jacobian_colouring_hint() const {
+  // Attachments couple rows the components' colourings may share.
+  if (!attachments_.empty()) return {};
   if (components_.size() == 1) return components_[0]->jacobian_colouring_hint();
   std::vector<int> colour(dims_.nx(), -1);
   for (size_t i = 0; i < components_.size(); ++i) {
@@ -329,6 +505,13 @@ double Scene::energy(const State& s) const {
     c.x.segment(d.nq, d.nv) = s.x.segment(dims_.nq + o.nv, d.nv);
     c.x.segment(d.nq + d.nv, d.nz) = s.x.segment(dims_.nq + dims_.nv + o.nz, d.nz);
     e += components_[i]->energy(c);
+  }
+  if (!attachments_.empty()) {
+    const Eigen::VectorXd q = s.x.head(dims_.nq), v = s.x.segment(dims_.nq, dims_.nv);
+    for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
+      attachment_points(k, s.t, q, v);
+      e += 0.5 * attachments_[k].k * (point_b_.p - point_a_.p).squaredNorm();
+    }
   }
   return e;
 }

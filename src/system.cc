@@ -46,6 +46,11 @@ std::unique_ptr<StructuredNewtonMatrix> System::make_structured_newton_matrix() 
   return nullptr;
 }
 
+void System::point_kinematics(double, int, const Eigen::Vector3d&, const ConstVectorRef&,
+                              const ConstVectorRef&, PointKinematics*) const {
+  throw std::logic_error(name() + ": has no points that attachments can act on");
+}
+
 void System::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                        const ConstVectorRef& z, const JacobianRequest& request,
                                        ForceJacobians* J) const {

@@ -1,7 +1,10 @@
 #pragma once
 // A scene composes components; each owns a contiguous slice of q, v and z
-// (in the order given) and they do not interact, so every matrix of the scene
-// is block diagonal over its components. The scene is itself a System.
+// (in the order given). Components interact only through attachments
+// (attachment.h), force elements the scene owns: without them every matrix
+// of the scene is block diagonal over its components; each attachment adds
+// the coupling blocks between the dofs its two points move with. The scene
+// is itself a System.
 
 #include <Eigen/Core>
 #include <memory>
@@ -9,13 +12,17 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/attachment.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
 
 class Scene : public System {
  public:
-  Scene(std::string name, std::vector<std::unique_ptr<System>> components);
+  // Throws InputError naming the attachment when a point does not exist or
+  // its component offers no points (point_elements() in system.h).
+  Scene(std::string name, std::vector<std::unique_ptr<System>> components,
+        std::vector<Attachment> attachments = {});
 
   Dimensions dimensions() const override { return dims_; }
   Capabilities capabilities() const override { return caps_; }
@@ -41,9 +48,14 @@ class Scene : public System {
   void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                          const ConstVectorRef& z, const ConstVectorRef& dv, double h,
                          VectorRef r) const override;
-  // The component's own when the scene has one component.
+  // The component's own when the scene has one component and no attachment.
   std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const override;
   const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
+  // The components' Jacobians and the attachments' blocks: exact, except
+  // that without request.complete the damper's dependence on q through the
+  // points' velocity Jacobians is dropped (as for particle springs; K stays
+  // symmetric). automatic_force_jacobians() takes the components' automatic
+  // ones and the attachments' complete analytic blocks.
   void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
@@ -59,6 +71,7 @@ class Scene : public System {
   const System& component(int i) const { return *components_[i]; }
   // Offsets of component i's slices in q, v and z.
   const Dimensions& offsets(int i) const { return offsets_[i]; }
+  const std::vector<Attachment>& attachments() const { return attachments_; }
 
  private:
   using JacobianMethod = void (System::*)(double, const ConstVectorRef&, const ConstVectorRef&,
@@ -68,8 +81,21 @@ class Scene : public System {
   void gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, const JacobianRequest& request, ForceJacobians* J,
                         JacobianMethod method) const;
+  // Attachment forces added into F (rows of the scene's v), and their
+  // Jacobian blocks into J (complete: with the damper's q-dependence).
+  void add_attachment_forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                             VectorRef F) const;
+  void add_attachment_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                bool complete, ForceJacobians* J) const;
+  // Both points of attachment k at (t, q, v) into point_a_ and point_b_.
+  void attachment_points(int k, double t, const ConstVectorRef& q, const ConstVectorRef& v) const;
+
   std::string name_;
   std::vector<std::unique_ptr<System>> components_;
+  std::vector<Attachment> attachments_;
+  // Scratch of the attachments' points, sized at construction.
+  mutable PointKinematics point_a_, point_b_;
+  mutable std::vector<Eigen::Vector3d> dp_dot_dq_;
   std::vector<Dimensions> offsets_;
   Dimensions dims_;
   Capabilities caps_;
@@ -88,6 +114,9 @@ class Scene : public System {
     std::vector<Slots> slots;
     std::vector<SparseMatrix> scratch_M;
     std::vector<ForceJacobians> scratch_J;
+    // Per attachment, the slots of its blocks in dF/dq and dF/dv
+    // (row-major over the dofs of point a, then point b).
+    std::vector<std::vector<int>> attachment_q, attachment_v;
   };
   Patterns& patterns() const;
   mutable std::once_flag patterns_built_;

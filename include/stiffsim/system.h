@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "stiffsim/linalg/sparse_pattern.h"
+#include "stiffsim/point_kinematics.h"
 #include "stiffsim/state.h"
 
 namespace stiffsim {
@@ -145,6 +146,21 @@ class System {
   // none. JacobianEvaluator checks it and uses it when it needs fewer colours
   // than its greedy colouring.
   virtual std::vector<int> jacobian_colouring_hint() const { return {}; }
+
+  // Material points that forces between components can act on
+  // (point_kinematics.h): their number (particle nodes, bodies of a tree;
+  // 0 when the system offers none), the most dofs one of them moves with,
+  // and one point's kinematics: `element` with the offset `local` in its
+  // frame, at (t, q, v). Only for systems with q_dot = v; allocates
+  // nothing when `out` has room for point_dofs(element) entries.
+  virtual int point_elements() const { return 0; }
+  virtual int point_dofs(int element) const {
+    (void)element;
+    return 0;
+  }
+  virtual void point_kinematics(double t, int element, const Eigen::Vector3d& local,
+                                const ConstVectorRef& q, const ConstVectorRef& v,
+                                PointKinematics* out) const;
 
   // Total energy (kinetic + potential) where defined, NaN otherwise.
   virtual double energy(const State& s) const {

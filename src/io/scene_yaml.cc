@@ -47,7 +47,9 @@ constexpr long kMaxTotalNodes = 10'000'000;
 // smallest scene already take a quarter of an hour.
 constexpr double kMaxSteps = 1e9;
 
-std::vector<std::string> top_level_keys() { return {"gravity", "components", "simulation"}; }
+std::vector<std::string> top_level_keys() {
+  return {"gravity", "components", "attachments", "simulation"};
+}
 
 std::vector<std::string> component_types() { return {"cloth", "rope", "mesh", "urdf"}; }
 
@@ -57,8 +59,8 @@ std::vector<std::string> component_keys(const std::string& type) {
             "stretch", "shear", "bend",  "pinned", "moving_pins", "drag"};
   }
   if (type == "rope") {
-    return {"name",   "type", "nodes",  "length",      "total_mass",
-            "stretch", "bend", "pinned", "moving_pins", "drag"};
+    return {"name",   "type",        "nodes", "length", "total_mass", "origin",
+            "direction", "stretch", "bend",  "pinned", "moving_pins", "drag"};
   }
   if (type == "mesh") {
     return {"name", "type",   "file",        "density", "stretch",
@@ -543,6 +545,18 @@ BuiltComponent build_rope(const Section& c, const std::string& name, const Eigen
   spec.nodes = static_cast<int>(c.integer("nodes", 2, kMaxTotalNodes));
   spec.length = c.number("length", Range::kPositive);
   spec.total_mass = c.number("total_mass", Range::kPositive);
+  for (auto [key, target] : {std::make_pair("origin", &spec.origin),
+                             std::make_pair("direction", &spec.direction)}) {
+    if (!c.has(key)) continue;
+    const YAML::Node n = c.list(key, 3, "[x, y, z]");
+    for (int i = 0; i < 3; ++i) {
+      (*target)[i] = c.number_value(n[i], std::string(key) + "[" + std::to_string(i) + "]",
+                                    Range::kFinite);
+    }
+    if (std::string(key) == "direction" && !(target->norm() > 0.0)) {
+      c.fail(n, "direction must not be zero");
+    }
+  }
   spec.stretch = read_springs(c, "stretch");
   spec.bend = read_springs(c, "bend");
   if (c.has("pinned")) spec.pinned = read_pinned(c, spec.nodes);
@@ -861,6 +875,97 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
   return with_location(c, name, [&] { return make_compliant(tree, o, bp); });
 }
 
+// One end of an attachment: {component, node} on a particle component,
+// {component, link, point} on a tree (point in the link's frame, default
+// its origin), or {world: [x, y, z]}.
+AttachmentPoint read_attachment_point(const Section& at, const std::string& key,
+                                      const std::vector<std::string>& names,
+                                      const std::vector<std::unique_ptr<System>>& components) {
+  const std::string what = at.label(key);
+  const Section p(at.doc(), at.require(key), at.context(), what + ".",
+                  {"component", "node", "link", "point", "world"});
+  AttachmentPoint out;
+  auto vector3 = [&](const std::string& k) {
+    const YAML::Node n = p.list(k, 3, "[x, y, z]");
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) {
+      v[i] = p.number_value(n[i], what + "." + k + "[" + std::to_string(i) + "]", Range::kFinite);
+    }
+    return v;
+  };
+  if (p.has("world")) {
+    for (const char* other : {"component", "node", "link", "point"}) {
+      if (p.has(other)) p.fail(p.get(other), what + ": a world point takes no '" + other + "'");
+    }
+    out.local = vector3("world");
+    return out;
+  }
+  const YAML::Node component = p.require("component");
+  const auto found = std::find(names.begin(), names.end(), component.Scalar());
+  if (!component.IsScalar() || found == names.end()) {
+    p.fail(component, "unknown component '" + component.Scalar() + "' in " + what +
+                          " (components: " + join(names) + ")");
+  }
+  out.component = static_cast<int>(found - names.begin());
+  const System& system = *components[out.component];
+  if (const auto* particles = dynamic_cast<const ParticleSystem*>(&system)) {
+    if (p.has("link") || p.has("point")) {
+      p.fail(p.has("link") ? p.get("link") : p.get("point"),
+             what + ": component '" + component.Scalar() + "' is made of particles: give a node");
+    }
+    out.element = static_cast<int>(
+        p.integer_value(p.require("node"), what + ".node", 0, particles->node_count() - 1));
+    return out;
+  }
+  const auto& tree = dynamic_cast<const ArticulatedSystem&>(system);
+  if (p.has("node")) {
+    p.fail(p.get("node"), what + ": component '" + component.Scalar() +
+                              "' is a URDF: give a link (and a point in its frame)");
+  }
+  const YAML::Node link = p.require("link");
+  const std::vector<TreeBody>& bodies = tree.tree().bodies;
+  int body = 0;
+  while (body < static_cast<int>(bodies.size()) && bodies[body].link != link.Scalar()) ++body;
+  if (body == static_cast<int>(bodies.size())) {
+    p.fail(link, "unknown link '" + link.Scalar() + "' in " + what + " (not a moving link of " +
+                     tree.tree().file + "; links welded by fixed joints are merged into their parent)");
+  }
+  if (system.point_elements() == 0) {
+    p.fail(link, what + ": component '" + component.Scalar() +
+                     "' has a floating or planar joint or is compliant; attachments need an exact "
+                     "tree of revolute and prismatic joints");
+  }
+  out.element = body;
+  if (p.has("point")) out.local = vector3("point");
+  return out;
+}
+
+// `attachments`: a list of {name, a, b, k, c} (attachment.h).
+std::vector<Attachment> read_attachments(const Section& top, const std::vector<std::string>& names,
+                                         const std::vector<std::unique_ptr<System>>& components) {
+  std::vector<Attachment> out;
+  if (!top.has("attachments")) return out;
+  const YAML::Node list = top.get("attachments");
+  if (!list.IsSequence()) {
+    top.fail(list, "attachments must be a list of {name, a, b, k, c}, got " + node_kind(list));
+  }
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string what = "attachments[" + std::to_string(i) + "]";
+    const Section at(top.doc(), list[i], what, what + ".", {"name", "a", "b", "k", "c"});
+    Attachment a;
+    a.name = at.has("name") ? at.text("name") : what;
+    a.a = read_attachment_point(at, "a", names, components);
+    a.b = read_attachment_point(at, "b", names, components);
+    if (a.a.component < 0 && a.b.component < 0) {
+      at.fail(list[i], what + ": both ends are world points");
+    }
+    a.k = at.number("k", Range::kNonNegative);
+    a.c = at.number_or("c", Range::kNonNegative, 0.0);
+    out.push_back(std::move(a));
+  }
+  return out;
+}
+
 SceneConfig build_scene(const YAML::Node& root, const Document& doc,
                         const std::filesystem::path& base_dir, const std::string& scene_name) {
   const Section top(doc, root, "", "", top_level_keys());
@@ -943,8 +1048,10 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
         c, name, [&] { return std::make_unique<ParticleSystem>(std::move(built.description)); }));
     config.surfaces.push_back(std::move(built.surface));
   }
+  std::vector<Attachment> attachments = read_attachments(top, names, components);
   try {
-    config.scene = std::make_unique<Scene>(scene_name, std::move(components));
+    config.scene =
+        std::make_unique<Scene>(scene_name, std::move(components), std::move(attachments));
   } catch (const InputError& e) {
     throw InputError(doc.source() + ": " + e.what());
   }
@@ -981,8 +1088,10 @@ void apply_override(YAML::Node root, const std::string& text, Document* doc) {
 
   YAML::Node target;  // the map that receives the last key
   size_t first_key = 1;
-  if (keys[0] == "gravity") {
-    if (keys.size() != 1) doc->fail_override(text, "gravity is set whole, e.g. gravity=[0,0,-1]");
+  if (keys[0] == "gravity" || keys[0] == "attachments") {
+    if (keys.size() != 1) {
+      doc->fail_override(text, keys[0] + " is set whole, e.g. gravity=[0,0,-1] or attachments=[]");
+    }
     target.reset(root);
     first_key = 0;
   } else if (keys[0] == "simulation") {

@@ -1,6 +1,7 @@
 #include "stiffsim/model/articulated.h"
 
 #include <unsupported/Eigen/AutoDiff>
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -777,6 +778,58 @@ double ArticulatedSystem::energy(const State& s) const {
     e += 0.5 * dr.kp * dq * dq;
   }
   return e;
+}
+
+int ArticulatedSystem::point_elements() const {
+  if (!options_.bushings.empty()) return 0;
+  for (const TreeBody& b : model_.tree.bodies) {
+    if (b.type != JointType::kRevolute && b.type != JointType::kPrismatic) return 0;
+  }
+  return model_.bodies();
+}
+
+int ArticulatedSystem::point_dofs(int body) const {
+  int depth = 0;
+  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) ++depth;
+  return depth;
+}
+
+void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector3d& local,
+                                         const ConstVectorRef& q, const ConstVectorRef& v,
+                                         PointKinematics* out) const {
+  (void)t;
+  // The bodies from the root down to `body` (every one a 1-DOF joint, so
+  // a body's index is also its joint's), first collected upwards.
+  std::vector<int>& path = out->dofs;
+  path.clear();
+  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) path.push_back(i);
+  std::reverse(path.begin(), path.end());
+  const int n = static_cast<int>(path.size());
+  out->J.resize(n);
+  out->axis.resize(n);
+  // World poses down the path. A URDF child frame is its joint's frame, so
+  // body i's world origin and axis are its joint's.
+  Pose<double> world;
+  for (int k = 0; k < n; ++k) {
+    const int i = path[k];
+    const TreeBody& b = model_.tree.bodies[i];
+    world = compose(world, body_joint_motion<double>(model_, i, q.segment(model_.q_offset[i], 1)).pose);
+    out->axis[k] = world.R * b.axis;
+    out->J[k] = world.p;  // the joint origin for now
+  }
+  out->p = world.R * local + world.p;
+  out->p_dot.setZero();
+  for (int k = 0; k < n; ++k) {
+    const int i = path[k];
+    if (model_.tree.bodies[i].type == JointType::kRevolute) {
+      out->J[k] = out->axis[k].cross(out->p - out->J[k]);
+    } else {
+      out->J[k] = out->axis[k];
+      out->axis[k].setZero();  // a translation turns nothing
+    }
+    path[k] = model_.v_offset[i];
+    out->p_dot += out->J[k] * v[path[k]];
+  }
 }
 
 double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) const {

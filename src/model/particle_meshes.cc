@@ -156,13 +156,18 @@ ParticleDescription make_rope(const RopeSpec& spec) {
   check_springs(who, "bend", spec.bend);
   check_common(who, spec.drag, spec.gravity);
 
+  if (!spec.origin.allFinite()) fail(who, "origin must be finite");
+  if (!spec.direction.allFinite() || !(spec.direction.norm() > 0.0)) {
+    fail(who, "direction must be a finite nonzero vector");
+  }
+  const Eigen::Vector3d u = spec.direction.normalized();
   const int n = spec.nodes;
   ParticleDescription d;
   d.name = spec.name;
   d.gravity = spec.gravity;
   d.drag = spec.drag;
   d.positions.resize(n);
-  for (int i = 0; i < n; ++i) d.positions[i] = {i * spec.length / (n - 1), 0.0, 0.0};
+  for (int i = 0; i < n; ++i) d.positions[i] = spec.origin + (i * spec.length / (n - 1)) * u;
   d.masses.assign(n, spec.total_mass / n);
   if (spec.stretch) {
     for (int i = 0; i + 1 < n; ++i) add_spring(&d, i, i + 1, *spec.stretch);

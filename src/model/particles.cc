@@ -308,6 +308,24 @@ Eigen::Vector3d ParticleSystem::node_velocity(int i, const ConstVectorRef& v, do
   return motion_of_node_[i] < 0 ? Eigen::Vector3d::Zero() : pinned_velocity(i, t);
 }
 
+void ParticleSystem::point_kinematics(double t, int node, const Eigen::Vector3d& local,
+                                      const ConstVectorRef& q, const ConstVectorRef& v,
+                                      PointKinematics* out) const {
+  (void)local;  // a node has no extent
+  out->p = node_position(node, q, t);
+  out->p_dot = node_velocity(node, v, t);
+  const int di = dof_of_node_[node];
+  const int n = di >= 0 ? 3 : 0;
+  out->dofs.resize(n);
+  out->J.resize(n);
+  out->axis.resize(n);
+  for (int k = 0; k < n; ++k) {
+    out->dofs[k] = di + k;
+    out->J[k] = Eigen::Vector3d::Unit(k);
+    out->axis[k].setZero();
+  }
+}
+
 void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                             const ConstVectorRef& z, VectorRef F) const {
   (void)z;

@@ -13,6 +13,7 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/integrator_factory.h"
+#include "stiffsim/scene.h"
 #include "stiffsim/model/particles.h"
 
 namespace stiffsim {
@@ -472,6 +473,78 @@ TEST(SceneYaml, MovingPinErrorsNameTheLine) {
   const std::string axis = load_error(
       base + "    moving_pins:\n      - {node: 0, w: 0.1}\nsimulation: {t_final: 1}\n");
   EXPECT_NE(axis.find("unknown key 'moving_pins[0].w'"), std::string::npos) << axis;
+}
+
+TEST(SceneYamlUrdf, ShippedArmRopeHoldsTheRopeAtTheGripper) {
+  // models/arm_rope.yaml for 0.3 s: the arm follows its drives and the
+  // rope's first node stays within |f| / k of the gripper's tip (the rope
+  // weighs 2 N; k = 1e5 N/m: 2e-5 m, plus what the swing adds).
+  const SceneConfig config = load_scene(model_path("arm_rope.yaml"));
+  const Scene& scene = *config.scene;
+  ASSERT_EQ(scene.attachments().size(), 1u);
+  const auto& arm = dynamic_cast<const ArticulatedSystem&>(scene.component(0));
+  auto vie = make_integrator(config.integrator_name, scene, config.integrator, config.implicit);
+  vie->initialize(scene.initial_state());
+  for (double t : {0.1, 0.3}) {
+    vie->integrate_to(t);
+    const Eigen::VectorXd& x = vie->state().x;
+    const Dimensions d = scene.dimensions();
+    PointKinematics tip;
+    arm.point_kinematics(t, 3, Eigen::Vector3d(0.1, 0.0, 0.0), x.head(4), x.segment(d.nq, 4), &tip);
+    const Eigen::Vector3d node0 = x.segment<3>(scene.offsets(1).nq);
+    EXPECT_LT((node0 - tip.p).norm(), 1e-3) << "t = " << t;
+    for (const JointDrive& drive : arm.options().drives) {
+      EXPECT_NEAR(x[drive.body], drive.target.value(t), 0.02) << "joint " << drive.body;
+    }
+  }
+}
+
+TEST(SceneYamlUrdf, AttachmentErrorsNameTheLine) {
+  const std::string head = R"(components:
+  - {name: arm, type: urdf, file: chain_2.urdf}
+  - {name: rope, type: rope, nodes: 3, length: 1, total_mass: 0.1, pinned: []}
+  - {name: loose, type: urdf, file: chain_2.urdf, formulation: compliant}
+attachments:
+)";
+  auto error = [&](const std::string& item) {
+    try {
+      parse_scene(head + item, model_path("bad.yaml"));
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::string link = error(
+      "  - {a: {component: arm, link: hand}, b: {component: rope, node: 0}, k: 1}\n");
+  EXPECT_NE(link.find("bad.yaml:6:"), std::string::npos) << link;
+  EXPECT_NE(link.find("unknown link 'hand' in attachments[0].a"), std::string::npos) << link;
+  const std::string node = error(
+      "  - {a: {component: arm, link: link_2}, b: {component: rope, node: 3}, k: 1}\n");
+  EXPECT_NE(node.find("bad.yaml:6:"), std::string::npos) << node;
+  EXPECT_NE(node.find("attachments[0].b.node must be at most 2"), std::string::npos) << node;
+  EXPECT_NE(error("  - {a: {component: arm2, link: link_2}, b: {world: [0, 0, 0]}, k: 1}\n")
+                .find("unknown component 'arm2'"),
+            std::string::npos);
+  EXPECT_NE(error("  - {a: {component: rope, link: link_2}, b: {world: [0, 0, 0]}, k: 1}\n")
+                .find("is made of particles: give a node"),
+            std::string::npos);
+  EXPECT_NE(error("  - {a: {component: loose, link: link_2}, b: {world: [0, 0, 0]}, k: 1}\n")
+                .find("attachments need an exact tree"),
+            std::string::npos);
+  EXPECT_NE(error("  - {a: {world: [0, 0, 0]}, b: {world: [1, 0, 0]}, k: 1}\n")
+                .find("both ends are world points"),
+            std::string::npos);
+  EXPECT_NE(error("  - {a: {component: arm, link: link_2}, b: {world: [0, 0, 0]}, k: -1}\n")
+                .find("attachments[0].k must be >= 0"),
+            std::string::npos);
+  // A good one loads, and --set replaces the list whole.
+  EXPECT_EQ(error("  - {a: {component: arm, link: link_2, point: [0, 0, -0.1]}, b: {component: "
+                  "rope, node: 0}, k: 1.0e4, c: 1}\n"),
+            "no error");
+  const SceneConfig none = parse_scene(
+      head + "  - {a: {component: arm, link: link_2}, b: {component: rope, node: 0}, k: 1}\n",
+      model_path("good.yaml"), {"attachments=[]"});
+  EXPECT_TRUE(none.scene->attachments().empty());
 }
 
 TEST(SceneYamlUrdf, SeveralUrdfComponentsShareASceneWithTheirOwnColumnsAndSettings) {

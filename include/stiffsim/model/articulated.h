@@ -147,6 +147,13 @@ class ArticulatedSystem : public System {
                                  const ConstVectorRef& z, const JacobianRequest& request,
                                  ForceJacobians* J) const override;
   double energy(const State& s) const override;
+  // Bodies are points attachments can act on (a point fixed in the body's
+  // frame) when every joint is revolute or prismatic (q_dot = v; a
+  // floating, planar or compliant tree offers none).
+  int point_elements() const override;
+  int point_dofs(int body) const override;
+  void point_kinematics(double t, int body, const Eigen::Vector3d& local, const ConstVectorRef& q,
+                        const ConstVectorRef& v, PointKinematics* out) const override;
 
   // --- For reports and tests. ---
   const RigidTree& tree() const { return model_.tree; }

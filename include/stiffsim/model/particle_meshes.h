@@ -38,6 +38,9 @@ struct RopeSpec {
   std::optional<std::vector<int>> pinned;  // absent: node 0
   double drag = 0.0;
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};
+  // Node 0's position and the direction the rope is laid out in (any
+  // nonzero length; normalized).
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero(), direction = Eigen::Vector3d::UnitX();
 };
 
 struct TriangleMesh {

@@ -85,6 +85,12 @@ class ParticleSystem : public System {
   // tiling, so nodes of one colour are at L1 distance >= 5 and never share a
   // row; 6 columns per node give 78 colours at every size, the lower bound.
   std::vector<int> jacobian_colouring_hint() const override;
+  // Every node is a point attachments can act on: a free node moves with its
+  // three dofs, a pinned one with none (it follows its motion, if any).
+  int point_elements() const override { return node_count(); }
+  int point_dofs(int node) const override { return dof_of_node_[node] >= 0 ? 3 : 0; }
+  void point_kinematics(double t, int node, const Eigen::Vector3d& local, const ConstVectorRef& q,
+                        const ConstVectorRef& v, PointKinematics* out) const override;
   // Kinetic + gravitational + spring potential energy.
   double energy(const State& s) const override;
 

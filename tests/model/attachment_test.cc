@@ -1,0 +1,252 @@
+// Attachments between components (attachment.h, Scene): a rope hung on a
+// link of a chain, a link tied to another link of its own tree, a rope end
+// tied to the world. The coupled Jacobians (off-diagonal blocks included)
+// against central differences of the scene's forces, energy conserved
+// without dampers, linear momentum conserved between two free ropes.
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+#include <memory>
+
+#include "stiffsim/error.h"
+#include "stiffsim/integrators/runge_kutta45.h"
+#include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/model/articulated.h"
+#include "stiffsim/model/compliant.h"
+#include "stiffsim/model/particle_meshes.h"
+#include "stiffsim/model/particles.h"
+#include "stiffsim/model/urdf.h"
+#include "stiffsim/scene.h"
+
+namespace stiffsim {
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+
+std::unique_ptr<ParticleSystem> free_rope(const std::string& name, int nodes, double c,
+                                          Vector3d gravity, Vector3d shift = Vector3d::Zero()) {
+  RopeSpec spec;
+  spec.name = name;
+  spec.nodes = nodes;
+  spec.length = 0.5;
+  spec.total_mass = 0.05;
+  spec.stretch = SpringParameters{2e3, c};
+  spec.bend = SpringParameters{1.0, 0.1 * c};
+  spec.pinned = std::vector<int>{};
+  spec.gravity = gravity;
+  ParticleDescription d = make_rope(spec);
+  for (Vector3d& p : d.positions) p += shift;
+  return std::make_unique<ParticleSystem>(d);
+}
+
+std::unique_ptr<ArticulatedSystem> chain(int links, double damping) {
+  ArticulatedOptions o;
+  o.initial_q = VectorXd::LinSpaced(links, 0.3, -0.2);
+  o.joint_forces.assign(links, JointForce{0.0, 0.0, damping});
+  return std::make_unique<ArticulatedSystem>(make_chain_tree(links), o);
+}
+
+// A chain of 3 links, then a rope whose node 0 hangs at a point of link 2
+// (body index 2, 0.1 m down its axis and off to the side), whose last node
+// is tied to a world point, and link 0 tied to link 2 within the chain.
+std::unique_ptr<Scene> hung_rope(double c) {
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(chain(3, c));
+  const Vector3d tip(0.02, 0.0, -0.1);
+  parts.push_back(free_rope("rope", 5, c, Vector3d(0, 0, -9.81), Vector3d(0.05, 0.0, -0.3)));
+  std::vector<Attachment> at(3);
+  at[0] = {"grip", {0, 2, tip}, {1, 0, Vector3d::Zero()}, 1e3, 2.0 * c};
+  at[1] = {"tail", {1, 4, Vector3d::Zero()}, {-1, 0, Vector3d(0.6, 0.1, -0.3)}, 50.0, c};
+  at[2] = {"brace", {0, 0, Vector3d(0.0, 0.03, -0.05)}, {0, 2, Vector3d(0.01, 0, 0)}, 30.0, c};
+  return std::make_unique<Scene>("hung", std::move(parts), std::move(at));
+}
+
+VectorXd scene_forces(const Scene& s, double t, const VectorXd& q, const VectorXd& v) {
+  VectorXd F(s.dimensions().nv);
+  s.forces(t, q, v, VectorXd(), F);
+  return F;
+}
+
+// A state away from rest: positions moved, every velocity nonzero.
+State moving_state(const Scene& s) {
+  State x = s.initial_state();
+  const Dimensions d = s.dimensions();
+  for (int i = 0; i < d.nq; ++i) x.x[i] += 0.03 * std::sin(1.3 * i + 0.2);
+  for (int i = 0; i < d.nv; ++i) x.x[d.nq + i] = 0.7 * std::cos(0.9 * i);
+  return x;
+}
+
+void expect_jacobians_match_differences(const Scene& s, bool complete) {
+  const Dimensions d = s.dimensions();
+  const State x = moving_state(s);
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
+  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
+  for (int j = 0; j < d.nq; ++j) {
+    VectorXd qp = q, qm = q;
+    qp[j] += 1e-6;
+    qm[j] -= 1e-6;
+    Kd.col(j) = (scene_forces(s, 0.2, qp, v) - scene_forces(s, 0.2, qm, v)) / 2e-6;
+  }
+  for (int j = 0; j < d.nv; ++j) {
+    VectorXd vp = v, vm = v;
+    vp[j] += 1e-3;
+    vm[j] -= 1e-3;
+    Dd.col(j) = (scene_forces(s, 0.2, q, vp) - scene_forces(s, 0.2, q, vm)) / 2e-3;
+  }
+  ForceJacobians J = s.jacobian_pattern();
+  JacobianRequest request;
+  request.complete = complete;
+  s.force_jacobians(0.2, q, v, VectorXd(), request, &J);
+  const MatrixXd K = MatrixXd(J.dF_dq), D = MatrixXd(J.dF_dv);
+  // The chain's rows (0..2) against the rope's columns (3..17) and back:
+  // the coupling blocks are there and right.
+  EXPECT_GT(Kd.block(0, 3, 3, 15).norm(), 1.0);
+  EXPECT_LT((K - Kd).norm(), 1e-6 * Kd.norm()) << "K\n" << K - Kd;
+  EXPECT_LT((D - Dd).norm(), 1e-8 * std::max(Dd.norm(), 1.0)) << "D\n" << D - Dd;
+  EXPECT_LT((K.block(0, 3, 3, 15) - Kd.block(0, 3, 3, 15)).norm(), 1e-6 * Kd.norm());
+  EXPECT_LT((K.block(3, 0, 15, 3) - Kd.block(3, 0, 15, 3)).norm(), 1e-6 * Kd.norm());
+}
+
+TEST(Attachment, CompleteJacobiansMatchCentralDifferences) {
+  expect_jacobians_match_differences(*hung_rope(0.5), true);
+}
+
+TEST(Attachment, JacobiansMatchDifferencesOnAnArmWithCrossedAxes) {
+  // models/arm.urdf: a vertical axis, then three horizontal ones; the rope
+  // hangs at a point off the gripper's axis.
+  std::vector<std::unique_ptr<System>> parts;
+  ArticulatedOptions o;
+  o.initial_q = VectorXd::LinSpaced(4, 0.4, -0.3);
+  parts.push_back(std::make_unique<ArticulatedSystem>(
+      load_urdf(std::string(STIFFSIM_SOURCE_DIR) + "/models/arm.urdf", UrdfOptions{}, nullptr), o));
+  parts.push_back(free_rope("rope", 5, 0.5, Vector3d(0, 0, -9.81), Vector3d(0.9, 0.0, 0.1)));
+  std::vector<Attachment> at = {
+      {"grip", {0, 3, Vector3d(0.1, 0.02, -0.01)}, {1, 0, Vector3d::Zero()}, 1e3, 4.0}};
+  const Scene s("arm", std::move(parts), std::move(at));
+  const Dimensions d = s.dimensions();
+  const State x = moving_state(s);
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
+  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
+  for (int j = 0; j < d.nq; ++j) {
+    VectorXd qp = q, qm = q, vp = v, vm = v;
+    qp[j] += 1e-6;
+    qm[j] -= 1e-6;
+    vp[j] += 1e-3;
+    vm[j] -= 1e-3;
+    Kd.col(j) = (scene_forces(s, 0.0, qp, v) - scene_forces(s, 0.0, qm, v)) / 2e-6;
+    Dd.col(j) = (scene_forces(s, 0.0, q, vp) - scene_forces(s, 0.0, q, vm)) / 2e-3;
+  }
+  ForceJacobians J = s.jacobian_pattern();
+  JacobianRequest complete;
+  complete.complete = true;
+  s.force_jacobians(0.0, q, v, VectorXd(), complete, &J);
+  EXPECT_LT((MatrixXd(J.dF_dq) - Kd).norm(), 1e-6 * Kd.norm()) << MatrixXd(J.dF_dq) - Kd;
+  EXPECT_LT((MatrixXd(J.dF_dv) - Dd).norm(), 1e-8 * Dd.norm());
+}
+
+TEST(Attachment, SymmetricJacobiansAreExactWithoutDampers) {
+  // Without dampers nothing is dropped: K is exact, and the attachments'
+  // share of it (the scene's less the same components' without them) is
+  // symmetric (the chain's own K is not, at nonzero velocity).
+  const auto s = hung_rope(0.0);
+  expect_jacobians_match_differences(*s, false);
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(chain(3, 0.0));
+  parts.push_back(free_rope("rope", 5, 0.0, Vector3d(0, 0, -9.81), Vector3d(0.05, 0.0, -0.3)));
+  const Scene bare("bare", std::move(parts));
+  const State x = moving_state(*s);
+  const Dimensions d = s->dimensions();
+  auto stiffness = [&](const Scene& scene) {
+    ForceJacobians J = scene.jacobian_pattern();
+    scene.force_jacobians(0.0, x.x.head(d.nq), x.x.segment(d.nq, d.nv), VectorXd(),
+                          JacobianRequest{}, &J);
+    return MatrixXd(J.dF_dq);
+  };
+  const MatrixXd share = stiffness(*s) - stiffness(bare);
+  EXPECT_GT(share.norm(), 1.0);
+  EXPECT_LT((share - share.transpose()).norm(), 1e-12 * share.norm());
+}
+
+TEST(Attachment, EnergyIsConservedWithoutDampers) {
+  // Chain, rope and the three springs, no damper anywhere, under gravity:
+  // RK45 at 1e-10 keeps the total energy (the attachments' springs
+  // included) to its own tolerance.
+  const auto s = hung_rope(0.0);
+  IntegratorSettings tight;
+  tight.accuracy = 1e-10;
+  RungeKutta45 rk(*s, tight);
+  rk.initialize(s->initial_state());
+  const double e0 = s->energy(s->initial_state());
+  double worst = 0.0;
+  for (double t = 0.05; t <= 0.5 + 1e-9; t += 0.05) {
+    rk.integrate_to(t);
+    worst = std::max(worst, std::abs(s->energy(rk.state()) - e0));
+  }
+  // Scale: the energy that moves (the rope falls about 0.1 m).
+  EXPECT_LT(worst, 1e-7) << "e0 = " << e0;
+  // And it did move.
+  EXPECT_GT((rk.state().x - s->initial_state().x).norm(), 1e-2);
+}
+
+TEST(Attachment, FreeRopesKeepTheirLinearMomentum) {
+  // Two free ropes without gravity, tied end to end by a damped spring and
+  // started apart and moving: internal forces only, so sum m v is constant.
+  // Implicit Euler keeps linear invariants exactly (up to the Newton
+  // tolerance); RK45 to its accuracy.
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(free_rope("left", 4, 0.3, Vector3d::Zero()));
+  parts.push_back(free_rope("right", 4, 0.3, Vector3d::Zero(), Vector3d(0.7, 0.1, 0.0)));
+  std::vector<Attachment> at = {
+      {"tie", {0, 3, Vector3d::Zero()}, {1, 0, Vector3d::Zero()}, 500.0, 1.0}};
+  Scene s("ropes", std::move(parts), std::move(at));
+  const Dimensions d = s.dimensions();
+  State x0 = s.initial_state();
+  for (int i = 0; i < d.nv; ++i) x0.x[d.nq + i] = 0.5 * std::sin(2.1 * i);
+  auto momentum = [&](const Eigen::VectorXd& x) {
+    Vector3d p = Vector3d::Zero();
+    for (int c = 0; c < 2; ++c) {
+      const auto& rope = dynamic_cast<const ParticleSystem&>(s.component(c));
+      for (int n = 0; n < rope.node_count(); ++n) {
+        p += rope.description().masses[n] *
+             x.segment<3>(d.nq + s.offsets(c).nv + rope.dof_of_node(n));
+      }
+    }
+    return p;
+  };
+  const Vector3d p0 = momentum(x0.x);
+  IntegratorSettings fixed;
+  fixed.fixed_step = true;
+  fixed.max_step = 0.01;
+  fixed.accuracy = 1e-10;
+  VelocityImplicitEuler vie(s, fixed, ImplicitSettings{});
+  vie.initialize(x0);
+  vie.integrate_to(1.0);
+  EXPECT_LT((momentum(vie.state().x) - p0).norm(), 1e-9 * (1.0 + p0.norm()));
+  // The tie pulled: the ends met (the spring's rest length is zero).
+  const Vector3d gap = vie.state().x.segment<3>(s.offsets(1).nq) - vie.state().x.segment<3>(9);
+  EXPECT_LT(gap.norm(), 0.7);
+}
+
+TEST(Attachment, BadPointsAreRejected) {
+  auto scene_with = [](Attachment a) {
+    std::vector<std::unique_ptr<System>> parts;
+    parts.push_back(chain(2, 0.0));
+    RigidTree tree = make_chain_tree(2);
+    parts.push_back(make_compliant(tree, ArticulatedOptions{}, BushingParameters{}));
+    Scene s("bad", std::move(parts), {a});
+  };
+  EXPECT_THROW(scene_with({"x", {0, 5, Vector3d::Zero()}, {-1, 0, Vector3d::Zero()}, 1.0, 0.0}),
+               InputError);
+  EXPECT_THROW(scene_with({"x", {1, 0, Vector3d::Zero()}, {-1, 0, Vector3d::Zero()}, 1.0, 0.0}),
+               InputError);
+  EXPECT_THROW(scene_with({"x", {0, 1, Vector3d::Zero()}, {-1, 0, Vector3d::Zero()}, -1.0, 0.0}),
+               InputError);
+  EXPECT_NO_THROW(scene_with({"x", {0, 1, Vector3d::Zero()}, {-1, 0, Vector3d::Zero()}, 1.0, 0.0}));
+}
+
+}  // namespace
+}  // namespace stiffsim
