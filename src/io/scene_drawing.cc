@@ -1,0 +1,163 @@
+#include "stiffsim/io/scene_drawing.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <set>
+#include <utility>
+
+#include "stiffsim/error.h"
+#include "stiffsim/model/articulated.h"
+#include "stiffsim/model/particles.h"
+
+namespace stiffsim {
+namespace {
+
+// Each undirected edge once, as (smaller, larger), in a fixed order so that
+// drawings (and tests) do not depend on the order of the triangles.
+class EdgeSet {
+ public:
+  void add(int a, int b) {
+    if (a != b) edges_.insert({std::min(a, b), std::max(a, b)});
+  }
+  bool empty() const { return edges_.empty(); }
+  std::vector<std::array<int, 2>> list() const {
+    std::vector<std::array<int, 2>> out;
+    out.reserve(edges_.size());
+    for (const auto& e : edges_) out.push_back({e.first, e.second});
+    return out;
+  }
+
+ private:
+  std::set<std::pair<int, int>> edges_;
+};
+
+ComponentDrawing draw_particles(const ParticleSystem& system,
+                                const std::vector<std::array<int, 3>>* triangles, double t,
+                                const Eigen::VectorXd& x, int q_offset) {
+  ComponentDrawing out;
+  out.name = system.name();
+  const int nodes = system.node_count();
+  out.points.resize(3, nodes);
+  for (int n = 0; n < nodes; ++n) {
+    const int dof = system.dof_of_node(n);
+    if (dof >= 0) {
+      out.points.col(n) = x.segment<3>(q_offset + dof);
+    } else {
+      // Pins can move: where the path puts the node at t, as the forces saw it.
+      out.points.col(n) = system.pinned_position(n, t);
+      out.fixed.push_back(n);
+    }
+  }
+  EdgeSet edges;
+  if (triangles != nullptr) {
+    for (const auto& tri : *triangles) {
+      edges.add(tri[0], tri[1]);
+      edges.add(tri[1], tri[2]);
+      edges.add(tri[2], tri[0]);
+    }
+  } else {
+    // A rope's stretch springs join consecutive nodes; its bend springs (two
+    // apart) would draw a second, confusing line along it.
+    const std::vector<Spring>& springs = system.description().springs;
+    for (const Spring& s : springs) {
+      if (std::abs(s.a - s.b) == 1) edges.add(s.a, s.b);
+    }
+    if (edges.empty()) {
+      for (const Spring& s : springs) edges.add(s.a, s.b);
+    }
+  }
+  out.segments = edges.list();
+  return out;
+}
+
+ComponentDrawing draw_articulated(const ArticulatedSystem& system, const Eigen::VectorXd& x,
+                                  int q_offset) {
+  ComponentDrawing out;
+  out.name = system.name();
+  const Eigen::VectorXd q = x.segment(q_offset, system.dimensions().nq);
+  // world_poses() runs the tree's own kinematics: for the compliant
+  // formulation that tree is the forest of free bodies, whose q are their
+  // frames' world poses, so it gives every body's frame in both.
+  const std::vector<Pose<double>> world = system.world_poses(q);
+  const int bodies = static_cast<int>(world.size());
+
+  // The joints to draw, (parent, child, placement), parent -1 the world:
+  // the tree's (a floating root is joined to nothing) and the compliant
+  // formulation's bushings, which stand for the tree's joints.
+  struct Joint {
+    int parent, child;
+    Eigen::Vector3d origin;  // of the joint frame in the parent's frame
+  };
+  std::vector<Joint> joints;
+  const RigidTree& tree = system.tree();
+  for (int i = 0; i < bodies; ++i) {
+    const TreeBody& b = tree.bodies[i];
+    if (b.parent < 0 && b.type == JointType::kFloating) continue;
+    joints.push_back({b.parent, i, b.placement.translation()});
+  }
+  for (const Bushing& bu : system.options().bushings) {
+    joints.push_back({bu.parent, bu.child, bu.placement.translation()});
+  }
+
+  std::vector<Eigen::Vector3d> points;
+  for (const Pose<double>& pose : world) points.push_back(pose.p);
+  std::vector<bool> has_child(bodies, false);
+  for (const Joint& j : joints) {
+    int from = j.parent;
+    if (j.parent < 0) {
+      from = static_cast<int>(points.size());
+      points.push_back(j.origin);
+      out.fixed.push_back(from);
+    } else {
+      has_child[j.parent] = true;
+    }
+    out.segments.push_back({from, j.child});
+  }
+  for (int i = 0; i < bodies; ++i) {
+    const Eigen::Vector3d& com = tree.bodies[i].inertia.com;
+    if (has_child[i] || com.isZero(0.0)) continue;
+    out.segments.push_back({i, static_cast<int>(points.size())});
+    points.push_back(world[i].p + 2.0 * (world[i].R * com));
+  }
+  out.points.resize(3, static_cast<Eigen::Index>(points.size()));
+  for (size_t k = 0; k < points.size(); ++k)
+    out.points.col(static_cast<Eigen::Index>(k)) = points[k];
+  return out;
+}
+
+}  // namespace
+
+std::vector<ComponentDrawing> draw_scene(
+    const Scene& scene, const std::vector<std::vector<std::array<int, 3>>>& surfaces, double t,
+    const Eigen::VectorXd& x) {
+  const Dimensions dims = scene.dimensions();
+  if (x.size() != dims.nx()) {
+    throw InputError("drawing scene '" + scene.name() + "': state of size " +
+                     std::to_string(x.size()) + ", expected " + std::to_string(dims.nx()));
+  }
+  std::vector<ComponentDrawing> out;
+  for (int i = 0; i < scene.component_count(); ++i) {
+    const System& component = scene.component(i);
+    const int q_offset = scene.offsets(i).nq;
+    if (const auto* particles = dynamic_cast<const ParticleSystem*>(&component)) {
+      const std::vector<std::array<int, 3>>* triangles = nullptr;
+      if (i < static_cast<int>(surfaces.size()) && !surfaces[i].empty()) {
+        triangles = &surfaces[i];
+        const int nodes = particles->node_count();
+        for (const auto& tri : *triangles) {
+          if (*std::min_element(tri.begin(), tri.end()) < 0 ||
+              *std::max_element(tri.begin(), tri.end()) >= nodes) {
+            triangles = nullptr;  // not this component's numbering: draw springs instead
+            break;
+          }
+        }
+      }
+      out.push_back(draw_particles(*particles, triangles, t, x, q_offset));
+    } else if (const auto* articulated = dynamic_cast<const ArticulatedSystem*>(&component)) {
+      out.push_back(draw_articulated(*articulated, x, q_offset));
+    }
+  }
+  return out;
+}
+
+}  // namespace stiffsim
