@@ -19,6 +19,7 @@
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/integrator_factory.h"
 #include "stiffsim/io/run_settings.h"
+#include "stiffsim/io/scene_drawing.h"
 #include "stiffsim/io/scene_run.h"
 #include "stiffsim/io/scene_yaml.h"
 #include "stiffsim/io/stats_writer.h"
@@ -89,6 +90,27 @@ py::dict dofs_dict(const Dimensions& d) {
   out["nq"] = d.nq;
   out["nv"] = d.nv;
   out["nz"] = d.nz;
+  return out;
+}
+
+// draw_scene() as a list of {name, points (n, 3), segments (m, 2), fixed
+// (k,)}, NumPy arrays that matplotlib takes as they are.
+py::list scene_drawing(const PyScene& s, double t, const Eigen::VectorXd& x) {
+  py::list out;
+  for (const ComponentDrawing& d : draw_scene(s.scene(), s.config->surfaces, t, x)) {
+    Eigen::Matrix<int, Eigen::Dynamic, 2, Eigen::RowMajor> segments(d.segments.size(), 2);
+    for (size_t k = 0; k < d.segments.size(); ++k) {
+      segments(k, 0) = d.segments[k][0];
+      segments(k, 1) = d.segments[k][1];
+    }
+    py::dict component;
+    component["name"] = d.name;
+    component["points"] = Eigen::Matrix<double, Eigen::Dynamic, 3>(d.points.transpose());
+    component["segments"] = segments;
+    component["fixed"] = Eigen::VectorXi(Eigen::Map<const Eigen::VectorXi>(
+        d.fixed.data(), static_cast<Eigen::Index>(d.fixed.size())));
+    out.append(component);
+  }
   return out;
 }
 
@@ -297,6 +319,10 @@ PYBIND11_MODULE(_stiffsim, m) {
                              [](const PyScene& s) { return s.config->integrator.accuracy; })
       .def_property_readonly("fixed_step",
                              [](const PyScene& s) { return s.config->integrator.fixed_step; })
+      .def("drawing", &scene_drawing, py::arg("t"), py::arg("x"),
+           "Points and segments of every drawable component at time t and state x = [q; v; z] "
+           "(a row of the trajectory CSV without t): a list of dicts {name, points (n, 3), "
+           "segments (m, 2) point indices, fixed: indices of points held by the world}.")
       .def("__repr__", [](const PyScene& s) {
         const Dimensions d = s.scene().dimensions();
         return "<stiffsim.Scene '" + s.scene().name() + "' nq=" + std::to_string(d.nq) +
