@@ -55,16 +55,18 @@ std::vector<std::string> component_types() { return {"cloth", "rope", "mesh", "u
 
 std::vector<std::string> component_keys(const std::string& type) {
   if (type == "cloth") {
-    return {"name",    "type",  "nodes", "size",   "total_mass",
-            "stretch", "shear", "bend",  "pinned", "moving_pins", "drag"};
+    return {"name",   "type",        "nodes", "size",   "total_mass", "stretch",
+            "shear",  "bend",        "pinned", "moving_pins", "drag",  "masses",
+            "velocities", "node_file"};
   }
   if (type == "rope") {
-    return {"name",   "type",        "nodes", "length", "total_mass", "origin",
-            "direction", "stretch", "bend",  "pinned", "moving_pins", "drag"};
+    return {"name",     "type",   "nodes",       "length", "total_mass", "origin",
+            "direction", "stretch", "bend", "pinned", "moving_pins", "drag",
+            "masses",   "velocities", "node_file"};
   }
   if (type == "mesh") {
-    return {"name", "type",   "file",        "density", "stretch",
-            "bend", "pinned", "moving_pins", "drag"};
+    return {"name",   "type",        "file", "density", "stretch",    "bend",
+            "pinned", "moving_pins", "drag", "masses",  "velocities", "node_file"};
   }
   if (type == "urdf") {
     return {"name",
@@ -432,6 +434,118 @@ ScalarPath read_path(const Section& c, const YAML::Node& n, const std::string& w
     }
   }
   return ScalarPath::keyframes(std::move(times), std::move(values), label);
+}
+
+// Per-node data: `node_file` (a CSV with a header naming some of node,
+// mass, vx, vy, vz, pinned; one row per node it sets), then `masses` and
+// `velocities`, each a list for every node or a map node -> value, which
+// override the file. A node's mass replaces what the component gave it.
+void read_node_data(const Section& c, const std::filesystem::path& base_dir,
+                    ParticleDescription* d) {
+  const long nodes = static_cast<long>(d->positions.size());
+  auto velocities = [&]() -> std::vector<Eigen::Vector3d>& {
+    if (d->velocities.empty()) d->velocities.assign(nodes, Eigen::Vector3d::Zero());
+    return d->velocities;
+  };
+  if (c.has("node_file")) {
+    const std::string file = c.text("node_file");
+    std::filesystem::path resolved(file);
+    if (resolved.is_relative()) resolved = base_dir / resolved;
+    std::ifstream in(resolved);
+    if (!in) {
+      c.fail(c.get("node_file"), "node file '" + file + "' not found (looked for " +
+                                     resolved.lexically_normal().string() + ")");
+    }
+    const std::string where = resolved.lexically_normal().string();
+    auto bad = [&](int line, const std::string& what) {
+      c.fail(c.get("node_file"), where + ":" + std::to_string(line) + ": " + what);
+    };
+    std::string line;
+    int number = 0;
+    std::vector<std::string> header;
+    while (std::getline(in, line)) {
+      ++number;
+      if (!line.empty() && line.back() == '\r') line.pop_back();
+      if (line.empty() || line[0] == '#') continue;
+      std::vector<std::string> fields;
+      std::stringstream split_line(line);
+      for (std::string f; std::getline(split_line, f, ',');) {
+        f.erase(0, f.find_first_not_of(" \t"));
+        f.erase(f.find_last_not_of(" \t") + 1);
+        fields.push_back(f);
+      }
+      if (header.empty()) {
+        header = fields;
+        for (const std::string& h : header) {
+          if (!contains({"node", "mass", "vx", "vy", "vz", "pinned"}, h)) {
+            bad(number, "unknown column '" + h + "' (expected some of: node, mass, vx, vy, vz, pinned)");
+          }
+        }
+        if (!contains(header, std::string("node"))) bad(number, "the header has no 'node' column");
+        continue;
+      }
+      if (fields.size() != header.size()) {
+        bad(number, std::to_string(fields.size()) + " fields, expected " +
+                        std::to_string(header.size()) + " (as the header)");
+      }
+      long node = -1;
+      for (std::size_t k = 0; k < header.size(); ++k) {
+        double value = 0.0;
+        const char* first = fields[k].data();
+        const auto result = std::from_chars(first, first + fields[k].size(), value);
+        if (result.ec != std::errc() || result.ptr != first + fields[k].size() ||
+            !std::isfinite(value)) {
+          bad(number, "column '" + header[k] + "': '" + fields[k] + "' is not a finite number");
+        }
+        if (header[k] == "node") {
+          if (value != std::floor(value) || value < 0 || value >= nodes) {
+            bad(number, "node " + fields[k] + " is not a node index 0.." + std::to_string(nodes - 1));
+          }
+          node = static_cast<long>(value);
+        }
+      }
+      for (std::size_t k = 0; k < header.size(); ++k) {
+        const double value = std::stod(fields[k]);
+        if (header[k] == "mass") {
+          if (!(value > 0.0)) bad(number, "mass must be positive, got " + fields[k]);
+          d->masses[node] = value;
+        } else if (header[k] == "vx" || header[k] == "vy" || header[k] == "vz") {
+          velocities()[node][header[k][1] - 'x'] = value;
+        } else if (header[k] == "pinned" && value != 0.0 &&
+                   std::find(d->pinned.begin(), d->pinned.end(), node) == d->pinned.end()) {
+          d->pinned.push_back(static_cast<int>(node));
+        }
+      }
+    }
+  }
+  // A list of one entry per node, or a map node -> entry.
+  auto each = [&](const std::string& key, const auto& apply) {
+    if (!c.has(key)) return;
+    const YAML::Node n = c.get(key);
+    if (n.IsSequence()) {
+      if (static_cast<long>(n.size()) != nodes) {
+        c.fail(n, key + " lists " + std::to_string(n.size()) + " nodes; the component has " +
+                      std::to_string(nodes) + " (or give a map node -> value)");
+      }
+      for (long i = 0; i < nodes; ++i) apply(i, n[i], key + "[" + std::to_string(i) + "]");
+    } else if (n.IsMap()) {
+      for (const auto& entry : n) {
+        const long i = c.integer_value(entry.first, key + " node", 0, nodes - 1);
+        apply(i, entry.second, key + "." + entry.first.Scalar());
+      }
+    } else {
+      c.fail(n, key + " must be a list (every node) or a map node -> value, got " + node_kind(n));
+    }
+  };
+  each("masses", [&](long i, const YAML::Node& v, const std::string& what) {
+    d->masses[i] = c.number_value(v, what, Range::kPositive);
+  });
+  each("velocities", [&](long i, const YAML::Node& v, const std::string& what) {
+    if (!v.IsSequence() || v.size() != 3) c.fail(v, what + " must be [vx, vy, vz], got " + node_kind(v));
+    for (int k = 0; k < 3; ++k) {
+      velocities()[i][k] = c.number_value(v[k], what + "[" + std::to_string(k) + "]", Range::kFinite);
+    }
+  });
 }
 
 // `moving_pins`: a list of {node, x, y, z}, each axis a path (read_path)
@@ -1038,6 +1152,7 @@ SceneConfig build_scene(const YAML::Node& root, const Document& doc,
     } else {
       built = build_mesh(c, name, gravity, base_dir);
     }
+    read_node_data(c, base_dir, &built.description);
     read_moving_pins(c, &built.description);
     total_nodes += static_cast<long>(built.description.positions.size());
     if (total_nodes > kMaxTotalNodes) {

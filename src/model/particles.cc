@@ -112,6 +112,15 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
     fail(who, std::to_string(desc_.lattice.size()) + " lattice coordinates given for " +
                   std::to_string(nodes) + " nodes");
   }
+  if (!desc_.velocities.empty() && desc_.velocities.size() != desc_.positions.size()) {
+    fail(who, std::to_string(desc_.velocities.size()) + " velocities given for " +
+                  std::to_string(nodes) + " nodes");
+  }
+  for (std::size_t i = 0; i < desc_.velocities.size(); ++i) {
+    if (!desc_.velocities[i].allFinite()) {
+      fail(who, "velocity of node " + std::to_string(i) + " is not finite");
+    }
+  }
   for (int i = 0; i < nodes; ++i) {
     if (!desc_.positions[i].allFinite()) {
       fail(who, "position of node " + std::to_string(i) + " is not finite");
@@ -247,7 +256,10 @@ State ParticleSystem::initial_state() const {
   const Dimensions d = dimensions();
   State s(0.0, Eigen::VectorXd::Zero(d.nx()));
   for (int i = 0; i < node_count(); ++i) {
-    if (dof_of_node_[i] >= 0) s.x.segment<3>(dof_of_node_[i]) = desc_.positions[i];
+    const int di = dof_of_node_[i];
+    if (di < 0) continue;
+    s.x.segment<3>(di) = desc_.positions[i];
+    if (!desc_.velocities.empty()) s.x.segment<3>(d.nq + di) = desc_.velocities[i];
   }
   return s;
 }

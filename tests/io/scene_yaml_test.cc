@@ -454,6 +454,63 @@ TEST(SceneYaml, ShippedRopeShakeMovesItsPinAlongThePath) {
   EXPECT_FALSE(config.scene->capabilities().passive);
 }
 
+TEST(SceneYaml, PerNodeMassesVelocitiesAndPinsFromListsMapsAndAFile) {
+  const std::string dir = ::testing::TempDir();
+  {
+    std::ofstream csv(dir + "/nodes.csv");
+    csv << "# node data\nnode, mass, vx, vz, pinned\n2, 0.5, 1.0, -2.0, 0\n4, 0.25, 0, 0, 1\n";
+  }
+  const std::string text = R"(components:
+  - name: rope
+    type: rope
+    nodes: 5
+    length: 1.0
+    total_mass: 0.1
+    stretch: {k: 100}
+    node_file: nodes.csv
+    masses: {3: 0.125}
+    velocities: {1: [0, 3, 0]}
+)";
+  const SceneConfig config = parse_scene(text, dir + "/scene.yaml");
+  const auto& rope = dynamic_cast<const ParticleSystem&>(config.scene->component(0));
+  const ParticleDescription& d = rope.description();
+  EXPECT_EQ(d.masses[0], 0.1 / 5);
+  EXPECT_EQ(d.masses[2], 0.5);
+  EXPECT_EQ(d.masses[3], 0.125);
+  EXPECT_EQ(d.masses[4], 0.25);
+  // Node 0 pinned by default, node 4 by the file: 3 free nodes (1, 2, 3).
+  EXPECT_EQ(config.scene->dimensions().nv, 9);
+  const State x0 = config.scene->initial_state();
+  const int nq = 9;
+  EXPECT_EQ(x0.x.segment<3>(nq + rope.dof_of_node(1)), Eigen::Vector3d(0, 3, 0));
+  EXPECT_EQ(x0.x.segment<3>(nq + rope.dof_of_node(2)), Eigen::Vector3d(1, 0, -2));
+  EXPECT_EQ(x0.x.segment<3>(nq + rope.dof_of_node(3)), Eigen::Vector3d::Zero());
+  // A list gives every node.
+  const SceneConfig listed = parse_scene(text, dir + "/scene.yaml",
+                                         {"rope.masses=[1, 2, 3, 4, 5]", "rope.node_file=null"});
+  EXPECT_EQ(dynamic_cast<const ParticleSystem&>(listed.scene->component(0)).description().masses[4], 5.0);
+  // Errors name the file and line.
+  {
+    std::ofstream csv(dir + "/bad_nodes.csv");
+    csv << "node,mass\n1,0.5\n9,0.5\n";
+  }
+  try {
+    parse_scene(text, dir + "/scene.yaml", {"rope.node_file=bad_nodes.csv"});
+    ADD_FAILURE() << "expected an error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bad_nodes.csv:3: node 9 is not a node index 0..4"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_NE(load_error(text, {"rope.masses=[1, 2]"}, dir + "/scene.yaml").find("masses lists 2 nodes"),
+            std::string::npos);
+  EXPECT_NE(load_error(text, {"rope.velocities={1: [1, 2]}"}, dir + "/scene.yaml")
+                .find("velocities.1 must be [vx, vy, vz]"),
+            std::string::npos);
+  EXPECT_NE(load_error(text, {"rope.masses={1: -1}"}, dir + "/scene.yaml").find("must be positive"),
+            std::string::npos);
+}
+
 TEST(SceneYaml, MovingPinErrorsNameTheLine) {
   const std::string base = std::string(kCloth).substr(0, std::string(kCloth).find("simulation:"));
   const std::string out_of_range =

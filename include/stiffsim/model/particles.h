@@ -34,6 +34,7 @@ struct ParticleDescription {
   std::string name;                        // component name: CSV columns <name>/n<i>/x
   std::vector<Eigen::Vector3d> positions;  // every node, pinned ones included
   std::vector<double> masses;              // every node, > 0
+  std::vector<Eigen::Vector3d> velocities;  // initial, every node (empty: all at rest)
   std::vector<Spring> springs;
   std::vector<int> pinned;  // node indices; not degrees of freedom
   std::vector<PinMotion> pin_motions;  // pinned nodes that move (at most one each)
