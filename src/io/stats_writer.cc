@@ -9,6 +9,7 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/io/atomic_file.h"
 
 namespace stiffsim {
 namespace {
@@ -147,22 +148,9 @@ StatsWriter::~StatsWriter() {
 
 void StatsWriter::write(const RunSummary& summary) {
   if (!pending_) throw std::logic_error("StatsWriter::write called twice");
-  const std::string text = stats_json(summary);
-  std::FILE* file = std::fopen(temp_path_.c_str(), "wb");
-  if (file == nullptr) {
-    throw std::runtime_error(temp_path_ + ": cannot write (" + std::strerror(errno) + ")");
-  }
-  const bool written = std::fwrite(text.data(), 1, text.size(), file) == text.size();
-  const bool closed = std::fclose(file) == 0;
-  if (!written || !closed) {
-    throw std::runtime_error(temp_path_ + ": write failed (" + std::strerror(errno) + ")");
-  }
-  std::error_code error;
-  std::filesystem::rename(temp_path_, path_, error);
-  if (error) {
-    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" + error.message() +
-                             ")");
-  }
+  // The temporary made at construction is "<path>.tmp", the one
+  // write_file_atomically() writes and commits.
+  write_file_atomically(path_, stats_json(summary));
   pending_ = false;
 }
 

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/io/atomic_file.h"
 
 namespace stiffsim {
 
@@ -94,13 +95,7 @@ void TrajectoryWriter::close_and_rename() {
     std::remove(temp_path_.c_str());
     throw std::runtime_error(temp_path_ + ": write failed (" + why + ")");
   }
-  std::error_code error;
-  std::filesystem::rename(temp_path_, path_, error);
-  if (error) {
-    std::remove(temp_path_.c_str());
-    throw std::runtime_error(path_ + ": cannot rename from " + temp_path_ + " (" + error.message() +
-                             ")");
-  }
+  commit_temporary(temp_path_, path_);
 }
 
 void TrajectoryWriter::finish() {

@@ -7,34 +7,12 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/io/atomic_file.h"
 #include "stiffsim/io/trajectory_writer.h"
 #include "stiffsim/model/particles.h"
 
 namespace stiffsim {
 namespace {
-
-// Writes `text` to `path` through a temporary file, so a reader never sees a
-// half-written frame.
-void write_file_atomically(const std::string& path, const std::string& text) {
-  const std::string temp = path + ".tmp";
-  std::FILE* file = std::fopen(temp.c_str(), "wb");
-  if (file == nullptr) {
-    throw std::runtime_error(temp + ": cannot create (" + std::strerror(errno) + ")");
-  }
-  const bool written = std::fwrite(text.data(), 1, text.size(), file) == text.size();
-  const bool closed = std::fclose(file) == 0;
-  if (!written || !closed) {
-    const std::string why = std::strerror(errno);
-    std::remove(temp.c_str());
-    throw std::runtime_error(temp + ": write failed (" + why + ")");
-  }
-  std::error_code error;
-  std::filesystem::rename(temp, path, error);
-  if (error) {
-    std::remove(temp.c_str());
-    throw std::runtime_error(path + ": cannot rename from " + temp + " (" + error.message() + ")");
-  }
-}
 
 void append_int(long value, std::string* out) { out->append(std::to_string(value)); }
 
