@@ -8,7 +8,7 @@ namespace stiffsim {
 
 SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
-                          const ProgressCallback& on_progress) {
+                          const ProgressCallback& on_progress, const StepCallback& on_step) {
   const auto start = WallClock::now();
   SimulationResult result;
   auto elapsed = [&] { return seconds_since(start); };
@@ -32,6 +32,10 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
   while (integrator.state().t < t_final) {
     integrator.step_at_most(t_final);
     const double t = integrator.state().t;
+    if (on_step && !on_step(integrator)) {
+      result.stopped_early = true;
+      break;
+    }
     if (period > 0.0) {
       // A sample within round-off of the step end is taken at the step end.
       const double snap = 1e-9 * period;

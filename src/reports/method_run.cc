@@ -58,55 +58,50 @@ MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const Be
   auto elapsed = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
-  try {
-    integrator->initialize(initial);
-    const std::vector<double> times = sample_times(bench);
-    std::size_t next = 0;
-    const double end = bench.t_final;
-    while (integrator->state().t < end * (1.0 - 1e-12)) {
-      const double t_before = integrator->state().t;
-      integrator->step_at_most(end);
-      const State& s = integrator->state();
-      if (integrator->statistics().steps_taken == 1) {
-        run.first_step_wall_seconds = elapsed();
-        run.first_step_stats = integrator->statistics();
-      }
-      if (!s.x.allFinite()) {
-        run.non_finite = true;
-        run.message = "non-finite state at t = " + std::to_string(s.t);
-        break;
-      }
-      if (energy) {
-        State copy = s;
-        const double e = system.energy(copy);
-        run.energy_max = std::max(run.energy_max, e);
-        run.energy_end = e;
-        const Dimensions d = system.dimensions();
-        if (mass.rows() == 0) mass = system.mass_matrix_pattern();
-        system.mass_matrix(s.q(d), &mass);
-        const Eigen::VectorXd v = s.v(d);
-        run.kinetic_max = std::max(run.kinetic_max, 0.5 * v.dot(mass * v));
-      }
-      Eigen::VectorXd x;
-      while (next < times.size() && times[next] <= s.t * (1.0 + 1e-12) + 1e-15) {
-        if (std::abs(times[next] - s.t) <= 1e-12 * std::max(1.0, s.t)) {
-          x = s.x;
-        } else {
-          integrator->interpolate(times[next], &x);
-        }
-        run.times.push_back(times[next]);
-        run.samples.push_back(x);
-        ++next;
-      }
-      (void)t_before;
-      if (elapsed() > options.wall_budget_seconds) {
-        run.over_budget = true;
-        char m[128];
-        std::snprintf(m, sizeof m, "over the %.0f s budget at t = %.3g", options.wall_budget_seconds, s.t);
-        run.message = m;
-        break;
-      }
+  // Per step: the first step's cost, a non-finite state, the energy, the
+  // wall-time budget; samples at k * sample_period and t_final (the initial
+  // state is not one).
+  auto on_step = [&](const IntegratorBase& it) {
+    const State& s = it.state();
+    if (it.statistics().steps_taken == 1) {
+      run.first_step_wall_seconds = elapsed();
+      run.first_step_stats = it.statistics();
     }
+    if (!s.x.allFinite()) {
+      run.non_finite = true;
+      run.message = "non-finite state at t = " + std::to_string(s.t);
+      return false;
+    }
+    if (energy) {
+      const double e = system.energy(s);
+      run.energy_max = std::max(run.energy_max, e);
+      run.energy_end = e;
+      const Dimensions d = system.dimensions();
+      if (mass.rows() == 0) mass = system.mass_matrix_pattern();
+      system.mass_matrix(s.q(d), &mass);
+      const Eigen::VectorXd v = s.v(d);
+      run.kinetic_max = std::max(run.kinetic_max, 0.5 * v.dot(mass * v));
+    }
+    if (elapsed() > options.wall_budget_seconds) {
+      run.over_budget = true;
+      char m[128];
+      std::snprintf(m, sizeof m, "over the %.0f s budget at t = %.3g", options.wall_budget_seconds,
+                    s.t);
+      run.message = m;
+      return false;
+    }
+    return true;
+  };
+  auto on_sample = [&](double t, const Eigen::VectorXd& x) {
+    if (t > initial.t) {
+      run.times.push_back(t);
+      run.samples.push_back(x);
+    }
+    return true;
+  };
+  try {
+    simulate(*integrator, initial, SimulationSettings{bench.t_final, bench.sample_period},
+             on_sample, nullptr, on_step);
     run.finished = !run.over_budget && !run.non_finite;
   } catch (const IntegrationError& e) {
     run.message = e.what();

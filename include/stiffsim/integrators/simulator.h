@@ -24,11 +24,17 @@ struct SimulationResult {
 using SampleCallback = std::function<bool(double t, const Eigen::VectorXd& x)>;
 // Called after every step with the fraction done (0..1).
 using ProgressCallback = std::function<void(double fraction)>;
+// Called after every step, before that step's samples, with the integrator
+// (its state, statistics); return false to stop the run after the step.
+using StepCallback = std::function<bool(const IntegratorBase& integrator)>;
 
 // Samples t = 0, T, 2T, ... and t_final. Throws IntegrationError from the
 // integrator after the samples before the failure have been delivered.
+// The one run loop: the CLI, the Python module and the reports all drive
+// their runs through it.
 SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
-                          const ProgressCallback& on_progress = nullptr);
+                          const ProgressCallback& on_progress = nullptr,
+                          const StepCallback& on_step = nullptr);
 
 }  // namespace stiffsim
