@@ -113,7 +113,8 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
     p->J.reserve(most_dofs);
     p->axis.reserve(most_dofs);
   }
-  dp_dot_dq_.reserve(most_dofs);
+  // Both points' dofs at once (add_attachment_jacobians).
+  dp_dot_dq_.reserve(2 * most_dofs);
 }
 
 void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
@@ -135,13 +136,17 @@ void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
   }
 }
 
+Eigen::Vector3d Scene::attachment_force(const Attachment& at) const {
+  return at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+}
+
 void Scene::add_attachment_forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                  VectorRef F) const {
+                                  double scale, VectorRef F) const {
   for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
     const Attachment& at = attachments_[k];
     attachment_points(k, t, q, v);
     // On point a; -f on point b. Generalized forces by virtual work: J^T f.
-    const Eigen::Vector3d f = at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+    const Eigen::Vector3d f = scale * attachment_force(at);
     const int oa = at.a.component < 0 ? 0 : offsets_[at.a.component].nv;
     const int ob = at.b.component < 0 ? 0 : offsets_[at.b.component].nv;
     for (size_t j = 0; j < point_a_.dofs.size(); ++j) F[oa + point_a_.dofs[j]] += point_a_.J[j].dot(f);
@@ -158,7 +163,7 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
   for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
     const Attachment& at = attachments_[k];
     attachment_points(k, t, q, v);
-    const Eigen::Vector3d f = at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+    const Eigen::Vector3d f = attachment_force(at);
     const int na = static_cast<int>(point_a_.dofs.size());
     const int n = na + static_cast<int>(point_b_.dofs.size());
     // Entry (i, m) over the dofs of a then b; s = +1 on a's, -1 on b's:
@@ -397,7 +402,7 @@ void Scene::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
     components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), z.segment(o.nz, d.nz),
                            F.segment(o.nv, d.nv));
   }
-  if (!attachments_.empty()) add_attachment_forces(t, q, v, F);
+  if (!attachments_.empty()) add_attachment_forces(t, q, v, 1.0, F);
 }
 
 void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
@@ -412,9 +417,7 @@ void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVect
   }
   if (attachments_.empty()) return;
   // r = M dv - h F: the attachments' forces enter with -h.
-  r /= -h;
-  add_attachment_forces(t, q, v, r);
-  r *= -h;
+  add_attachment_forces(t, q, v, -h, r);
 }
 
 std::unique_ptr<StructuredNewtonMatrix> Scene::make_structured_newton_matrix() const {

@@ -81,12 +81,15 @@ class Scene : public System {
   void gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, const JacobianRequest& request, ForceJacobians* J,
                         JacobianMethod method) const;
-  // Attachment forces added into F (rows of the scene's v), and their
-  // Jacobian blocks into J (complete: with the damper's q-dependence).
+  // Attachment forces times `scale` added into F (rows of the scene's v),
+  // and their Jacobian blocks into J (complete: with the damper's
+  // q-dependence).
   void add_attachment_forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                             VectorRef F) const;
+                             double scale, VectorRef F) const;
   void add_attachment_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                 bool complete, ForceJacobians* J) const;
+  // The force on point a of `at` from point_a_ and point_b_ (-it on b).
+  Eigen::Vector3d attachment_force(const Attachment& at) const;
   // Both points of attachment k at (t, q, v) into point_a_ and point_b_.
   void attachment_points(int k, double t, const ConstVectorRef& q, const ConstVectorRef& v) const;
 

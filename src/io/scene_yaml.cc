@@ -489,8 +489,9 @@ void read_node_data(const Section& c, const std::filesystem::path& base_dir,
                         std::to_string(header.size()) + " (as the header)");
       }
       long node = -1;
+      std::vector<double> values(header.size());
       for (std::size_t k = 0; k < header.size(); ++k) {
-        double value = 0.0;
+        double& value = values[k];
         const char* first = fields[k].data();
         const auto result = std::from_chars(first, first + fields[k].size(), value);
         if (result.ec != std::errc() || result.ptr != first + fields[k].size() ||
@@ -505,7 +506,7 @@ void read_node_data(const Section& c, const std::filesystem::path& base_dir,
         }
       }
       for (std::size_t k = 0; k < header.size(); ++k) {
-        const double value = std::stod(fields[k]);
+        const double value = values[k];
         if (header[k] == "mass") {
           if (!(value > 0.0)) bad(number, "mass must be positive, got " + fields[k]);
           d->masses[node] = value;
