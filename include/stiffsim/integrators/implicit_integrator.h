@@ -328,6 +328,10 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr double kReuseStepRatio = 4.0;
   // Halvings of a Newton step before the iteration counts as diverged.
   static constexpr int kMaxBacktracks = 8;
+  // The Krylov path's line search compares a trial's residual with the
+  // largest of the current one and the last kMeritMemory accepted ones
+  // (Grippo, Lampariello & Lucidi's non-monotone rule; see newton()).
+  static constexpr int kMeritMemory = 3;
 
   struct IterationMatrix {
     LinearSolverChoice solver;
