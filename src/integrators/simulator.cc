@@ -1,6 +1,7 @@
 #include "stiffsim/integrators/simulator.h"
 
 #include <cmath>
+#include <exception>
 
 #include "stiffsim/integrators/wall_clock.h"
 
@@ -65,6 +66,30 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
   }
   result.wall_seconds = elapsed();
   return result;
+}
+
+SimulationResult simulate(IntegratorBase& integrator, const State& initial,
+                          const SimulationSettings& settings, const std::vector<SampleSink*>& sinks,
+                          const ProgressCallback& on_progress, const StepCallback& on_step) {
+  const SampleCallback on_sample = [&sinks](double t, const Eigen::VectorXd& x) {
+    bool go_on = true;
+    for (SampleSink* sink : sinks) go_on = sink->on_sample(t, x) && go_on;
+    return go_on;
+  };
+  return simulate(integrator, initial, settings, on_sample, on_progress, on_step);
+}
+
+std::vector<std::string> end_sinks(const std::vector<SampleSink*>& sinks,
+                                   const std::string& reason) {
+  std::vector<std::string> errors;
+  for (SampleSink* sink : sinks) {
+    try {
+      sink->on_end(reason);
+    } catch (const std::exception& e) {
+      errors.push_back(e.what());
+    }
+  }
+  return errors;
 }
 
 }  // namespace stiffsim

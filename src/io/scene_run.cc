@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <initializer_list>
 #include <memory>
 
 #include "stiffsim/error.h"
@@ -54,15 +55,23 @@ SceneRunResult run_scene(const SceneRunRequest& request, const SceneRunHooks& ho
   const State initial = scene.initial_state();
   summary.energy_start = scene.energy(initial);
 
-  Eigen::VectorXd last_x;
-  const SampleCallback on_sample = [&](double t, const Eigen::VectorXd& x) {
-    if (trajectory) trajectory->write(t, x);
-    if (vtk) vtk->write_frame(t, x);
-    summary.t_reached = t;
-    last_x = x;
-    ++summary.samples;
-    return true;
-  };
+  // The summary's view of the samples: where the run got to.
+  struct Tracker : SampleSink {
+    RunSummary* summary;
+    Eigen::VectorXd last_x;
+    explicit Tracker(RunSummary* s) : summary(s) {}
+    bool on_sample(double t, const Eigen::VectorXd& x) override {
+      summary->t_reached = t;
+      last_x = x;
+      ++summary->samples;
+      return true;
+    }
+  } tracker(&summary);
+  std::vector<SampleSink*> sinks;
+  for (SampleSink* sink : std::initializer_list<SampleSink*>{trajectory.get(), vtk.get()}) {
+    if (sink) sinks.push_back(sink);
+  }
+  sinks.push_back(&tracker);
   const ProgressCallback on_progress = [&](double fraction) {
     if (!hooks.on_progress) return;
     std::string why = hooks.on_progress(fraction, settings.simulation.t_final);
@@ -72,7 +81,7 @@ SceneRunResult run_scene(const SceneRunRequest& request, const SceneRunHooks& ho
   const auto start = std::chrono::steady_clock::now();
   try {
     const SimulationResult run =
-        simulate(*integrator, initial, settings.simulation, on_sample, on_progress);
+        simulate(*integrator, initial, settings.simulation, sinks, on_progress);
     summary.stopped_early = run.stopped_early;
     if (run.stopped_early) summary.stop_reason = "stopped by the sample callback";
   } catch (const Stopped& stop) {
@@ -104,24 +113,15 @@ SceneRunResult run_scene(const SceneRunRequest& request, const SceneRunHooks& ho
   }
   summary.statistics = integrator->statistics();
   summary.report = integrator->report();
-  if (last_x.size() > 0) summary.energy_end = scene.energy(State(summary.t_reached, last_x));
+  if (tracker.last_x.size() > 0) {
+    summary.energy_end = scene.energy(State(summary.t_reached, tracker.last_x));
+  }
 
   // A failed run keeps what it computed, marked as incomplete; if even that
   // cannot be written, the writers' destructors remove their temporary files.
-  const auto finish = [&](auto& writer) {
-    if (!writer) return;
-    try {
-      if (result.message.empty()) {
-        writer->finish();
-      } else {
-        writer->finish_incomplete(result.message);
-      }
-    } catch (const std::exception& e) {
-      result.write_errors.push_back(e.what());
-    }
-  };
-  finish(trajectory);
-  finish(vtk);
+  for (std::string& error : end_sinks(sinks, result.message)) {
+    result.write_errors.push_back(std::move(error));
+  }
   if (stats) {
     try {
       stats->write(summary);

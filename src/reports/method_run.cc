@@ -92,16 +92,23 @@ MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const Be
     }
     return true;
   };
-  auto on_sample = [&](double t, const Eigen::VectorXd& x) {
-    if (t > initial.t) {
-      run.times.push_back(t);
-      run.samples.push_back(x);
+  // The error meters read the samples after the run (the initial state is
+  // not one).
+  struct Recorder : SampleSink {
+    MethodRun* run;
+    double t0;
+    Recorder(MethodRun* r, double t) : run(r), t0(t) {}
+    bool on_sample(double t, const Eigen::VectorXd& x) override {
+      if (t > t0) {
+        run->times.push_back(t);
+        run->samples.push_back(x);
+      }
+      return true;
     }
-    return true;
-  };
+  } recorder(&run, initial.t);
   try {
     simulate(*integrator, initial, SimulationSettings{bench.t_final, bench.sample_period},
-             on_sample, nullptr, on_step);
+             std::vector<SampleSink*>{&recorder}, nullptr, on_step);
     run.finished = !run.over_budget && !run.non_finite;
   } catch (const IntegrationError& e) {
     run.message = e.what();

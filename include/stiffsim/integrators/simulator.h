@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "stiffsim/integrators/integrator_base.h"
+#include "stiffsim/integrators/sample_sink.h"
 
 namespace stiffsim {
 
@@ -34,6 +35,14 @@ using StepCallback = std::function<bool(const IntegratorBase& integrator)>;
 // their runs through it.
 SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
+                          const ProgressCallback& on_progress = nullptr,
+                          const StepCallback& on_step = nullptr);
+
+// As above, each sample handed to every sink in order; the run stops after a
+// sample that any sink declined. The sinks are not ended: the caller does
+// that (end_sinks) once it knows how the run ended.
+SimulationResult simulate(IntegratorBase& integrator, const State& initial,
+                          const SimulationSettings& settings, const std::vector<SampleSink*>& sinks,
                           const ProgressCallback& on_progress = nullptr,
                           const StepCallback& on_step = nullptr);
 

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/integrators/sample_sink.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
@@ -22,8 +23,14 @@ namespace stiffsim {
 // "v:<name>" and "z:<name>" in the order of x = [q; v; z].
 std::vector<std::string> trajectory_columns(const System& system);
 
-class TrajectoryWriter {
+class TrajectoryWriter : public FileSink {
  public:
+  // As a run's sink every sample is a row; the run's end finishes the file.
+  bool on_sample(double t, const Eigen::VectorXd& x) override {
+    write(t, x);
+    return true;
+  }
+
   // Creates "<path>.tmp" and writes the header. Throws InputError if the file
   // cannot be created (e.g. its directory does not exist).
   TrajectoryWriter(const std::string& path, const System& system);
@@ -36,10 +43,10 @@ class TrajectoryWriter {
   void write(double t, const Eigen::VectorXd& x);
   // Flushes, closes and renames to the final path. Throws std::runtime_error
   // on a write error (disk full), leaving no file behind.
-  void finish();
+  void finish() override;
   // As finish(), after a footer line "# stopped early: <reason>" so that the
   // rows so far are kept but cannot be mistaken for a complete run.
-  void finish_incomplete(const std::string& reason);
+  void finish_incomplete(const std::string& reason) override;
 
   const std::string& path() const { return path_; }
   long rows() const { return rows_; }

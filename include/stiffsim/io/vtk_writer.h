@@ -18,14 +18,21 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/integrators/sample_sink.h"
 #include "stiffsim/scene.h"
 
 namespace stiffsim {
 
 class ParticleSystem;
 
-class VtkWriter {
+class VtkWriter : public FileSink {
  public:
+  // As a run's sink every sample is a frame; the run's end finishes the file.
+  bool on_sample(double t, const Eigen::VectorXd& x) override {
+    write_frame(t, x);
+    return true;
+  }
+
   // `surfaces`, if given, holds per component of `scene` its triangles in the
   // component's node numbering (SceneConfig::surfaces); components without
   // triangles are drawn as their springs. Creates `directory` if needed.
@@ -37,9 +44,9 @@ class VtkWriter {
   // One frame of the state x = [q; v; z] at time t.
   void write_frame(double t, const Eigen::VectorXd& x);
   // Writes the series file listing the frames so far.
-  void finish();
+  void finish() override;
   // As finish(), and the series file records why the run stopped.
-  void finish_incomplete(const std::string& reason);
+  void finish_incomplete(const std::string& reason) override;
 
   long frames() const { return static_cast<long>(times_.size()); }
   // Path of the series file finish() writes.
