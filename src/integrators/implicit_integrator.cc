@@ -11,29 +11,6 @@
 
 namespace stiffsim {
 
-JacobianScheme parse_jacobian_scheme(const std::string& name) {
-  if (name == "analytic") return JacobianScheme::kAnalytic;
-  if (name == "forward") return JacobianScheme::kForward;
-  if (name == "central") return JacobianScheme::kCentral;
-  if (name == "automatic") return JacobianScheme::kAutomatic;
-  throw InputError("unknown Jacobian scheme '" + name +
-                   "' (expected analytic, forward, central or automatic)");
-}
-
-std::string to_string(JacobianScheme scheme) {
-  switch (scheme) {
-    case JacobianScheme::kAnalytic:
-      return "analytic";
-    case JacobianScheme::kForward:
-      return "forward";
-    case JacobianScheme::kCentral:
-      return "central";
-    case JacobianScheme::kAutomatic:
-      return "automatic";
-  }
-  return "?";
-}
-
 NewtonForm parse_newton_form(const std::string& name) {
   if (name == "mass-matrix") return NewtonForm::kMassMatrix;
   if (name == "generic") return NewtonForm::kGeneric;

@@ -1,7 +1,6 @@
 #include "stiffsim/integrators/jacobian_evaluator.h"
 
 #include <algorithm>
-
 #include <array>
 #include <cassert>
 #include <cmath>
@@ -10,9 +9,33 @@
 #include <string>
 
 #include "stiffsim/error.h"
-#include "stiffsim/integrators/implicit_integrator.h"
+#include "stiffsim/integrators/jacobian_scheme.h"
 
 namespace stiffsim {
+
+JacobianScheme parse_jacobian_scheme(const std::string& name) {
+  if (name == "analytic") return JacobianScheme::kAnalytic;
+  if (name == "forward") return JacobianScheme::kForward;
+  if (name == "central") return JacobianScheme::kCentral;
+  if (name == "automatic") return JacobianScheme::kAutomatic;
+  throw InputError("unknown Jacobian scheme '" + name +
+                   "' (expected analytic, forward, central or automatic)");
+}
+
+std::string to_string(JacobianScheme scheme) {
+  switch (scheme) {
+    case JacobianScheme::kAnalytic:
+      return "analytic";
+    case JacobianScheme::kForward:
+      return "forward";
+    case JacobianScheme::kCentral:
+      return "central";
+    case JacobianScheme::kAutomatic:
+      return "automatic";
+  }
+  return "?";
+}
+
 namespace {
 
 // Drake's increments (ImplicitIntegrator::ComputeForwardDiffJacobian and
@@ -170,7 +193,8 @@ void JacobianEvaluator::evaluate_rates(double t, const Eigen::VectorXd& x,
   if (acceleration_) {
     // F - M(q) a (JacobianRequest::acceleration).
     system_.mass_matrix(q, &mass_);
-    f->head(dims_.nv).noalias() -= mass_ * Eigen::Map<const Eigen::VectorXd>(acceleration_, dims_.nv);
+    f->head(dims_.nv).noalias() -=
+        mass_ * Eigen::Map<const Eigen::VectorXd>(acceleration_, dims_.nv);
   }
   if (dims_.nz > 0) system_.misc_derivatives(t, q, v, z, f->tail(dims_.nz));
 }

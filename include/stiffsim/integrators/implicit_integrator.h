@@ -1,5 +1,5 @@
 #pragma once
-// What implicit methods share (DESIGN.md sections 2-4): Jacobian schemes, the
+// What implicit methods share (DESIGN.md sections 2-4): the Jacobians, the
 // four-trial reuse ladder, the Hairer-style Newton convergence test and the
 // linear solver behind the iteration matrix. Subclasses hold only their
 // method.
@@ -10,15 +10,12 @@
 
 #include "stiffsim/integrators/integrator_base.h"
 #include "stiffsim/integrators/jacobian_evaluator.h"
+#include "stiffsim/integrators/jacobian_scheme.h"
 #include "stiffsim/linalg/gmres.h"
 #include "stiffsim/linalg/linear_solver.h"
 #include "stiffsim/structured_newton_matrix.h"
 
 namespace stiffsim {
-
-enum class JacobianScheme { kAnalytic, kForward, kCentral, kAutomatic };
-JacobianScheme parse_jacobian_scheme(const std::string& name);  // "analytic", ...
-std::string to_string(JacobianScheme scheme);
 
 enum class NewtonForm {
   kMassMatrix,  // W = M - h D - h^2 K N (v rows scaled by M): keeps sparsity and symmetry

@@ -9,15 +9,11 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "stiffsim/integrators/jacobian_scheme.h"
 #include "stiffsim/linalg/column_colouring.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
-
-// Defined (with its enumerators) in implicit_integrator.h. Declared opaque
-// here so that implicit_integrator.h can itself hold a JacobianEvaluator
-// without an include cycle.
-enum class JacobianScheme;
 
 class JacobianEvaluator {
  public:
