@@ -297,6 +297,7 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   explored_ = last_jacobian_exact_ = false;
   if (!structured_) newton_solve_reason_.clear();
   last_factorization_seconds_ = krylov_excess_seconds_ = last_jacobian_seconds_ = 0.0;
+  solve_excess_seconds_ = 0.0;
   residual_scale_.resize(0);
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_}) v->resize(nx);
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(unknowns);
@@ -410,6 +411,17 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // factored at every iterate below
   } else if (krylov) {
     if (!iteration_matrix_factored() || formed_far_from(h)) refactor_first_ = true;
+    // The cost model looks ahead at a solve's start too: where the last
+    // solve's Krylov products beyond the first cost more than
+    // kStartRefactorShare of a factorization, the preconditioner is
+    // refactored now. The matrix drifts from step to step (a falling sheet
+    // turns), so the old factorization would cost this solve more still, and
+    // one made now serves every iteration of the step, where the rule above
+    // refactors only once the excess has been paid, part-way through.
+    if (solve_excess_seconds_ > kStartRefactorShare * last_factorization_seconds_) {
+      refactor_due_ = true;
+    }
+    solve_excess_seconds_ = 0.0;
   } else if (!full_newton) {
     if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
     if (!iteration_matrix_factored()) return false;
@@ -885,6 +897,7 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
   // more than the last factorization did; then the next iteration
   // refactors. A preconditioner that stays exact is never replaced.
   krylov_excess_seconds_ += seconds * (krylov.iterations - 1) / krylov.iterations;
+  solve_excess_seconds_ += seconds * (krylov.iterations - 1) / krylov.iterations;
   if (krylov_excess_seconds_ > last_factorization_seconds_) refactor_due_ = true;
   return true;
 }
