@@ -70,8 +70,8 @@ ComponentDrawing draw_particles(const ParticleSystem& system,
   return out;
 }
 
-ComponentDrawing draw_articulated(const ArticulatedSystem& system, const Eigen::VectorXd& x,
-                                  int q_offset) {
+ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
+                                  const Eigen::VectorXd& x, int q_offset) {
   ComponentDrawing out;
   out.name = system.name();
   const Eigen::VectorXd q = x.segment(q_offset, system.dimensions().nq);
@@ -119,9 +119,11 @@ ComponentDrawing draw_articulated(const ArticulatedSystem& system, const Eigen::
     out.segments.push_back({i, static_cast<int>(points.size())});
     points.push_back(world[i].p + 2.0 * (world[i].R * com));
   }
+  // A moving base carries every point, the world anchors too.
+  const Eigen::Vector3d base = system.root_displacement(t);
   out.points.resize(3, static_cast<Eigen::Index>(points.size()));
   for (size_t k = 0; k < points.size(); ++k)
-    out.points.col(static_cast<Eigen::Index>(k)) = points[k];
+    out.points.col(static_cast<Eigen::Index>(k)) = points[k] + base;
   return out;
 }
 
@@ -154,7 +156,7 @@ std::vector<ComponentDrawing> draw_scene(
       }
       out.push_back(draw_particles(*particles, triangles, t, x, q_offset));
     } else if (const auto* articulated = dynamic_cast<const ArticulatedSystem*>(&component)) {
-      out.push_back(draw_articulated(*articulated, x, q_offset));
+      out.push_back(draw_articulated(*articulated, t, x, q_offset));
     }
   }
   return out;

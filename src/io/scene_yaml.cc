@@ -79,6 +79,7 @@ std::vector<std::string> component_keys(const std::string& type) {
             "joint_rest",
             "joint_damping",
             "drives",
+            "root_motion",
             "bushing"};
   }
   return {"name", "type"};
@@ -896,6 +897,29 @@ std::vector<JointDrive> read_drives(const Section& c, const RigidTree& tree) {
   return drives;
 }
 
+// `root_motion`: {x, y, z}, each axis a path (read_path) of the base's
+// displacement; keyframes are refused where they are written, since their
+// rate jumps at every key (articulated.h, ArticulatedOptions::root_motion).
+std::optional<std::array<ScalarPath, 3>> read_root_motion(const Section& c) {
+  if (!c.has("root_motion")) return std::nullopt;
+  const Section m(c.doc(), c.get("root_motion"), c.context(), "root_motion.", {"x", "y", "z"});
+  std::array<ScalarPath, 3> paths{ScalarPath::constant(0.0), ScalarPath::constant(0.0),
+                                  ScalarPath::constant(0.0)};
+  const char* axes[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    if (!m.has(axes[a])) continue;
+    const std::string what = std::string("root_motion.") + axes[a];
+    paths[a] = read_path(m, m.get(axes[a]), what);
+    if (!paths[a].has_continuous_rate()) {
+      m.fail(m.get(axes[a]), what +
+                                 " is keyframed; a base's path needs a continuous rate (a "
+                                 "constant or a sinusoid): each key would jolt the joints "
+                                 "with an impulse");
+    }
+  }
+  return paths;
+}
+
 std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
                                    const Eigen::Vector3d& g, const std::filesystem::path& base_dir,
                                    std::vector<std::string>* notes) {
@@ -967,6 +991,7 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
     }
   }
   o.drives = read_drives(c, tree);
+  o.root_motion = read_root_motion(c);
   if (formulation == "exact") {
     if (c.has("bushing"))
       c.fail(c.get("bushing"), "bushing applies to formulation: compliant only");
@@ -977,6 +1002,11 @@ std::unique_ptr<System> build_urdf(const Section& c, const std::string& name,
   if (!o.drives.empty()) {
     c.fail(c.get("drives"), "drives need formulation: exact (the compliant formulation's joints "
                             "are bushings)");
+  }
+  if (o.root_motion) {
+    c.fail(c.get("root_motion"),
+           "root_motion needs formulation: exact (the compliant "
+           "formulation's bodies are free)");
   }
   BushingParameters bp;
   if (c.has("bushing")) {

@@ -282,6 +282,24 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     if (driven[dr.body]) throw InputError(w + ": joint '" + b.joint + "' has two drives");
     driven[dr.body] = true;
   }
+  if (options_.root_motion) {
+    if (!options_.bushings.empty()) {
+      throw InputError(w + ": root_motion needs the exact formulation (formulation: exact)");
+    }
+    for (const TreeBody& b : model_.tree.bodies) {
+      if (b.parent < 0 && (b.type == JointType::kFloating || b.type == JointType::kPlanar)) {
+        throw InputError(w + ": root_motion moves a base welded to the world, but link '" + b.link +
+                         "' is joined to the world by a " + joint_type_name(b.type) + " joint");
+      }
+    }
+    for (int k = 0; k < 3; ++k) {
+      if (!(*options_.root_motion)[k].has_continuous_rate()) {
+        throw InputError(w + ": root_motion." + "xyz"[k] +
+                         " is keyframed; a base's path needs a continuous rate (a constant or a "
+                         "sinusoid): each key would jolt the joints with an impulse");
+      }
+    }
+  }
   // A spring k (q - rest) and a drive kp (q - p(t)) are one spring of
   // stiffness k + kp about k rest / (k + kp) plus the torque kp p(t): the
   // model keeps the combined spring, add_drive_torques() the torque.
@@ -468,7 +486,7 @@ Capabilities ArticulatedSystem::capabilities() const {
   c.automatic_jacobians = true;
   c.has_energy = true;
   // A drive with a moving target does work on the system.
-  c.passive = options_.drives.empty();
+  c.passive = options_.drives.empty() && !options_.root_motion;
   c.constant_mass_matrix = constant_mass_;
   c.momentum_residual = true;
   return c;
@@ -603,9 +621,10 @@ void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) co
 }
 
 template <typename T, typename Positions, typename Velocities>
-void ArticulatedSystem::generalized_forces(const Positions& q, const Velocities& v,
+void ArticulatedSystem::generalized_forces(double t, const Positions& q, const Velocities& v,
                                            const double* acceleration,
                                            ArticulatedData<T>* data) const {
+  data->world_acceleration = world_acceleration_at(t);
   inverse_dynamics<T>(model_, q, v, acceleration, data);
   for (const Bushing& bu : options_.bushings) {
     add_bushing_forces<T>(bu, q, v, model_.q_offset, model_.v_offset, &data->F);
@@ -615,7 +634,7 @@ void ArticulatedSystem::generalized_forces(const Positions& q, const Velocities&
 void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                const ConstVectorRef& z, VectorRef F) const {
   (void)z;
-  generalized_forces<double>(q, v, nullptr, data_.get());
+  generalized_forces<double>(t, q, v, nullptr, data_.get());
   F = data_->F;
   add_drive_torques(t, F);
 }
@@ -632,7 +651,7 @@ void ArticulatedSystem::momentum_residual(double t, const ConstVectorRef& q, con
   // F - M(q) a at a = dv / h is -(M dv - h F) / h.
   (void)z;
   acceleration_ = dv / h;
-  generalized_forces<double>(q, v, acceleration_.data(), data_.get());
+  generalized_forces<double>(t, q, v, acceleration_.data(), data_.get());
   add_drive_torques(t, data_->F);
   r = -h * data_->F;
 }
@@ -644,7 +663,7 @@ std::unique_ptr<StructuredNewtonMatrix> ArticulatedSystem::make_structured_newto
   return std::make_unique<ArticulatedBodySolver>(model_);
 }
 
-void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v,
+void ArticulatedSystem::exact_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                         const double* acceleration, ForceJacobians* J) const {
   // Seeded forward mode: the columns of one colour share no row of [K D], so
   // they can share a derivative lane; each pass carries kLanes colours.
@@ -667,7 +686,7 @@ void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVect
     };
     for (int j = 0; j < nq; ++j) seed(j, q[j], &qd[j]);
     for (int j = 0; j < nv; ++j) seed(nq + j, v[j], &vd[j]);
-    generalized_forces<Dual>(qd, vd, acceleration, &data);
+    generalized_forces<Dual>(t, qd, vd, acceleration, &data);
     auto store = [&](SparseMatrix& A, int column_offset) {
       for (int j = 0; j < A.outerSize(); ++j) {
         const int lane = P.column_colour[column_offset + j] - first;
@@ -686,7 +705,7 @@ void ArticulatedSystem::exact_jacobians(const ConstVectorRef& q, const ConstVect
 void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
                                         const ConstVectorRef& z, const JacobianRequest& request,
                                         ForceJacobians* J) const {
-  (void)t, (void)z;
+  (void)z;
   if (!options_.bushings.empty()) {
     if (!bushing_derivatives_) bushing_derivatives_ = std::make_unique<BushingDerivatives>(*this);
     bushing_derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
@@ -694,16 +713,42 @@ void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const
     return;
   }
   if (!derivatives_) derivatives_ = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
-  derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+  const Vec6<double> world_acceleration = world_acceleration_at(t);
+  derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv, &world_acceleration);
   J->approximated_terms = 0;
+}
+
+Vec6<double> ArticulatedSystem::world_acceleration_at(double t) const {
+  Vec6<double> a = model_.world_acceleration;
+  if (options_.root_motion) {
+    // In the base's translating frame gravity is g - d''(t).
+    for (int k = 0; k < 3; ++k) a[3 + k] += (*options_.root_motion)[k].acceleration(t);
+  }
+  return a;
+}
+
+Eigen::Vector3d ArticulatedSystem::root_displacement(double t) const {
+  Eigen::Vector3d d = Eigen::Vector3d::Zero();
+  if (options_.root_motion) {
+    for (int k = 0; k < 3; ++k) d[k] = (*options_.root_motion)[k].value(t);
+  }
+  return d;
+}
+
+Eigen::Vector3d ArticulatedSystem::root_velocity(double t) const {
+  Eigen::Vector3d d = Eigen::Vector3d::Zero();
+  if (options_.root_motion) {
+    for (int k = 0; k < 3; ++k) d[k] = (*options_.root_motion)[k].rate(t);
+  }
+  return d;
 }
 
 void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
                                                   const ConstVectorRef& v, const ConstVectorRef& z,
                                                   const JacobianRequest& request,
                                                   ForceJacobians* J) const {
-  (void)t, (void)z;
-  exact_jacobians(q, v, request.acceleration, J);
+  (void)z;
+  exact_jacobians(t, q, v, request.acceleration, J);
 }
 
 void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
@@ -797,7 +842,6 @@ int ArticulatedSystem::point_dofs(int body) const {
 void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector3d& local,
                                          const ConstVectorRef& q, const ConstVectorRef& v,
                                          PointKinematics* out) const {
-  (void)t;
   // The bodies from the root down to `body` (every one a 1-DOF joint, so
   // a body's index is also its joint's), first collected upwards.
   std::vector<int>& path = out->dofs;
@@ -817,8 +861,8 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
     out->axis[k] = world.R * b.axis;
     out->J[k] = world.p;  // the joint origin for now
   }
-  out->p = world.R * local + world.p;
-  out->p_dot.setZero();
+  out->p = world.R * local + world.p;  // in the base frame until the end
+  out->p_dot = root_velocity(t);
   for (int k = 0; k < n; ++k) {
     const int i = path[k];
     if (model_.tree.bodies[i].type == JointType::kRevolute) {
@@ -830,6 +874,7 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
     path[k] = model_.v_offset[i];
     out->p_dot += out->J[k] * v[path[k]];
   }
+  out->p += root_displacement(t);
 }
 
 double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) const {

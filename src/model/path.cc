@@ -92,4 +92,9 @@ double ScalarPath::rate(double t) const {
   return 0.0;
 }
 
+double ScalarPath::acceleration(double t) const {
+  if (kind_ != Kind::kSinusoid) return 0.0;
+  return -amplitude_ * omega_ * omega_ * std::sin(omega_ * t + phase_);
+}
+
 }  // namespace stiffsim

@@ -168,7 +168,8 @@ RneaDerivatives::RneaDerivatives(const RigidTree& tree, std::vector<SpatialInert
 }
 
 void RneaDerivatives::forward_sweep(const ConstVectorRef& q, const ConstVectorRef& v,
-                                    const double* acceleration) {
+                                    const double* acceleration,
+                                    const Vec6<double>& world_acceleration) {
   // World velocities and accelerations as in evaluate_forces (a translating
   // part's columns are carried along by the parent: their rate is v_parent x
   // J; a rotating part's by the body: v x J), the composite-inertia
@@ -188,7 +189,7 @@ void RneaDerivatives::forward_sweep(const ConstVectorRef& q, const ConstVectorRe
     world_[i] = b.parent < 0 ? jm.pose : compose(world_[b.parent], jm.pose);
     const Pose<double>& X = world_[i];
     const Vec6<double> v_parent = b.parent < 0 ? Vec6<double>::Zero() : velocity_[b.parent];
-    const Vec6<double> a_parent = b.parent < 0 ? world_acceleration_ : acceleration_[b.parent];
+    const Vec6<double> a_parent = b.parent < 0 ? world_acceleration : acceleration_[b.parent];
 
     for (int l = 0; l < nvi; ++l) J_.col(vo + l) = motion_to_world(X, jm.S.col(l));
     if (b.type == JointType::kFloating) {
@@ -339,13 +340,14 @@ void RneaDerivatives::write_values(SparseMatrix* K, SparseMatrix* D) const {
 }
 
 void RneaDerivatives::compute(const ConstVectorRef& q, const ConstVectorRef& v,
-                              const double* acceleration, SparseMatrix* K, SparseMatrix* D) {
+                              const double* acceleration, SparseMatrix* K, SparseMatrix* D,
+                              const Vec6<double>* world_acceleration) {
   if (q.size() != nq_ || v.size() != nv_ || K->nonZeros() != k_nonzeros_ ||
       D->nonZeros() != d_nonzeros_ || K->cols() != nq_ || D->cols() != nv_) {
     throw std::invalid_argument(
         "RneaDerivatives::compute: sizes or patterns differ from the model");
   }
-  forward_sweep(q, v, acceleration);
+  forward_sweep(q, v, acceleration, world_acceleration ? *world_acceleration : world_acceleration_);
   backward_sweep();
   write_values(K, D);
 }

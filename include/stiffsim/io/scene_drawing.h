@@ -17,8 +17,9 @@
 // parent is the world) at the joint frame's origin, then one per leaf body
 // whose centre of mass is off its origin, at origin + 2 (COM - origin): the
 // far end of a uniform rod hung from its joint, so the last link of a chain
-// is drawn too. Segments: each joint's parent point (body origin or world
-// anchor) to its child's origin, and each leaf's origin to its tip.
+// is drawn too; a base moved by a root motion carries them all. Segments:
+// each joint's parent point (body origin or world anchor) to its child's
+// origin, and each leaf's origin to its tip.
 //
 // Components with no geometry (pure ODE systems) are left out.
 

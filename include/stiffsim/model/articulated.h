@@ -15,8 +15,10 @@
 // checks the analytic derivatives of force_jacobians().
 
 #include <Eigen/Core>
+#include <array>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -88,6 +90,16 @@ struct ArticulatedOptions {
   std::vector<Bushing> bushings;
   // Exact formulation only; at most one per joint.
   std::vector<JointDrive> drives;
+  // Exact formulation, every root welded to the world (revolute or
+  // prismatic root joints): the world frame the tree hangs from translates
+  // by d(t) = (x(t), y(t), z(t)) (paths with a continuous rate: constant or
+  // sinusoid; a keyframed path's rate jumps, which would be an impulse on
+  // the joints). The tree's dynamics in that translating frame are the
+  // fixed-base ones with gravity g - d''(t), which is how it is evaluated;
+  // q and v stay relative to the base, and so do energy(), kinetic_energy()
+  // and world_momentum(). World positions (point_kinematics, the drawing)
+  // add d(t), world velocities d'(t).
+  std::optional<std::array<ScalarPath, 3>> root_motion;
   // The initial state (sizes nq and nv); empty: every joint at 0, identity
   // quaternions, at rest.
   Eigen::VectorXd initial_q, initial_v;
@@ -166,6 +178,10 @@ class ArticulatedSystem : public System {
   // The drives' state-independent torques kp p(t) + kd p'(t) added into F.
   // energy() counts each drive's spring about its target at s.t.
   void add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> F) const;
+  // Where the root motion has moved the tree's base at t, and its velocity
+  // (zero without one).
+  Eigen::Vector3d root_displacement(double t) const;
+  Eigen::Vector3d root_velocity(double t) const;
   int body_q_offset(int body) const { return model_.q_offset[body]; }
   int body_v_offset(int body) const { return model_.v_offset[body]; }
   // Poses of every body in the world.
@@ -187,10 +203,12 @@ class ArticulatedSystem : public System {
  private:
   // F (or F - M a) into data->F: the inverse dynamics and the bushings.
   template <typename T, typename Positions, typename Velocities>
-  void generalized_forces(const Positions& q, const Velocities& v, const double* acceleration,
-                          ArticulatedData<T>* data) const;
-  void exact_jacobians(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration,
-                       ForceJacobians* J) const;
+  void generalized_forces(double t, const Positions& q, const Velocities& v,
+                          const double* acceleration, ArticulatedData<T>* data) const;
+  void exact_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                       const double* acceleration, ForceJacobians* J) const;
+  // Gravity as the world's upward acceleration, less the root's at t.
+  Vec6<double> world_acceleration_at(double t) const;
 
   struct Patterns {
     SparseMatrix mass;

@@ -20,7 +20,8 @@ struct ArticulatedData {
         V(model.bodies()),
         A(model.bodies()),
         f(model.bodies()),
-        F(model.nv) {}
+        F(model.nv),
+        world_acceleration(model.world_acceleration) {}
 
   // Inverse dynamics: each body's pose in its parent, motion subspace,
   // spatial velocity, acceleration and net force in its own frame.
@@ -28,6 +29,10 @@ struct ArticulatedData {
   std::vector<MotionSubspace<T>> S;
   std::vector<Vec6<T>> V, A, f;
   Eigen::Matrix<T, Eigen::Dynamic, 1> F;  // the generalized forces (nv)
+  // The world's upward acceleration at the evaluation's time: the model's
+  // (gravity) unless a prescribed root motion adds its own (ArticulatedSystem
+  // sets it before each evaluation).
+  Vec6<double> world_acceleration;
 };
 
 }  // namespace stiffsim

@@ -26,7 +26,7 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
                       const double* acceleration, ArticulatedData<T>* data) {
   const int nb = model.bodies();
   ArticulatedData<T>& d = *data;
-  const Vec6<T> a_world = model.world_acceleration.cast<T>();
+  const Vec6<T> a_world = d.world_acceleration.template cast<T>();
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model.tree.bodies[i];
     const int nv = joint_nv(b.type);

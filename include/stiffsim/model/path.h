@@ -25,7 +25,13 @@ class ScalarPath {
 
   double value(double t) const;
   double rate(double t) const;
+  // p''(t): zero inside keyframe segments, whose rate jumps at every key
+  // (see has_continuous_rate()).
+  double acceleration(double t) const;
   bool is_constant() const { return kind_ == Kind::kConstant; }
+  // False for keyframes: what follows such a path takes an impulse at each
+  // key, which acceleration() does not carry.
+  bool has_continuous_rate() const { return kind_ != Kind::kKeyframes; }
 
  private:
   enum class Kind { kConstant, kKeyframes, kSinusoid };

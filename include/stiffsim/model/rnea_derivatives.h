@@ -52,8 +52,10 @@ class RneaDerivatives {
   // `acceleration` (nv values, may be null) the derivatives of F - M(q) a at
   // that fixed a. K and D must have the constructor's patterns; only their
   // values are written. Allocates nothing.
+  // `world_acceleration`, if given, replaces gravity's upward acceleration
+  // of the world for this evaluation (a root that moves).
   void compute(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration,
-               SparseMatrix* K, SparseMatrix* D);
+               SparseMatrix* K, SparseMatrix* D, const Vec6<double>* world_acceleration = nullptr);
 
   int nq() const { return nq_; }
   int nv() const { return nv_; }
@@ -69,7 +71,8 @@ class RneaDerivatives {
     RunKind kind;
   };
 
-  void forward_sweep(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration);
+  void forward_sweep(const ConstVectorRef& q, const ConstVectorRef& v, const double* acceleration,
+                     const Vec6<double>& world_acceleration);
   void backward_sweep();
   void write_values(SparseMatrix* K, SparseMatrix* D) const;
 
