@@ -4,6 +4,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
 #include <unsupported/Eigen/AutoDiff>
 #include <utility>
 
@@ -16,14 +17,6 @@ namespace {
 // Same bound as the builders: a typo in a node count must fail with a message,
 // not try to allocate terabytes (and 3 * nodes must fit in an int index).
 constexpr long kMaxNodes = 10'000'000;
-
-// Below this length a spring counts as collapsed: its direction is undefined
-// and L/l would overflow. Far below any physical length, far above underflow.
-constexpr double kCollapsedLength = 1e-100;
-
-// Block order inside spring_slots_ (and the sign of each block in K and D).
-enum Block { kAA = 0, kAB = 1, kBA = 2, kBB = 3 };
-constexpr double kBlockSign[4] = {-1.0, +1.0, +1.0, -1.0};
 
 std::string node_range(int n) {
   std::ostringstream s;
@@ -41,60 +34,42 @@ std::string str(double x) {
   return s.str();
 }
 
-template <typename Scalar>
-using Vector3 = Eigen::Matrix<Scalar, 3, 1>;
+// Derivative lanes of one element: positions then velocities of its
+// stencil's nodes. Fixed size, so the dual numbers live on the stack and the
+// automatic Jacobian costs O(elements), never O(elements * dofs).
+template <int Nodes>
+using ElementDual = Eigen::AutoDiffScalar<Eigen::Matrix<double, 6 * Nodes, 1>>;
 
-// Geometry of one spring at the current positions. A collapsed spring gets
-// u = 0, so both its elastic and damping forces vanish (the direction of
-// k (l - L) u is undefined there), and collapsed = true so the Jacobian can
-// pick a finite value.
-template <typename Scalar>
-struct SpringFrame {
-  Vector3<Scalar> u;
-  Scalar l;
-  bool collapsed;
-};
-
-// A value without its derivatives (the identity on doubles).
-inline double constant(double x) { return x; }
-template <typename Derivatives>
-Eigen::AutoDiffScalar<Derivatives> constant(const Eigen::AutoDiffScalar<Derivatives>& x) {
-  return Eigen::AutoDiffScalar<Derivatives>(x.value());
-}
-
-template <typename Scalar>
-SpringFrame<Scalar> spring_frame(const Vector3<Scalar>& xa, const Vector3<Scalar>& xb) {
-  const Vector3<Scalar> d = xb - xa;
-  const Scalar l = d.norm();
-  // The derivative of |d| at d = 0 is NaN, and NaN * (u = 0) would leak into
-  // dual numbers: a collapsed l is a constant.
-  if (!(l > kCollapsedLength)) return {Vector3<Scalar>::Zero(), constant(l), true};
-  return {d / l, l, false};
-}
-
-// f_a of MODELS.md, f_b = -f_a, with vab = v_b - v_a. The one definition of
-// the spring force: forces() runs it on doubles, automatic_force_jacobians()
-// on dual numbers, so the two can never disagree.
-template <typename Scalar>
-Vector3<Scalar> spring_force_on_a(const Spring& sp, const Vector3<Scalar>& xa,
-                                  const Vector3<Scalar>& xb, const Vector3<Scalar>& vab) {
-  const SpringFrame<Scalar> f = spring_frame(xa, xb);
-  return (sp.k * (f.l - sp.rest_length) + sp.c * vab.dot(f.u)) * f.u;
-}
-
-// Derivative lanes of one spring: positions and velocities of its two nodes.
-// Fixed size, so the dual numbers live on the stack and the automatic
-// Jacobian costs O(springs), never O(springs * dofs).
-enum Lane { kXa = 0, kXb = 3, kVa = 6, kVb = 9, kLanes = 12 };
-using SpringDual = Eigen::AutoDiffScalar<Eigen::Matrix<double, kLanes, 1>>;
-
-Vector3<SpringDual> seeded(const Eigen::Vector3d& value, int first_lane) {
-  Vector3<SpringDual> x;
-  for (int i = 0; i < 3; ++i) x[i] = SpringDual(value[i], kLanes, first_lane + i);
+template <int Nodes>
+Vector3<ElementDual<Nodes>> seeded(const Eigen::Vector3d& value, int first_lane) {
+  Vector3<ElementDual<Nodes>> x;
+  for (int i = 0; i < 3; ++i) x[i] = ElementDual<Nodes>(value[i], 6 * Nodes, first_lane + i);
   return x;
 }
 
 }  // namespace
+
+template <typename E>
+inline bool ParticleSystem::gather(const E& e, double t, const ConstVectorRef& q,
+                                   const ConstVectorRef& v, Eigen::Vector3d* x,
+                                   Eigen::Vector3d* vel) const {
+  const auto stencil = e.nodes();
+  bool moves = false;
+  for (int i = 0; i < E::kNodes; ++i) {
+    // Free nodes read the state in place; the hot loops must not pay a call
+    // per node for them.
+    const int d = dof_of_node_[stencil[i]];
+    if (d >= 0) {
+      x[i] = q.segment<3>(d);
+      vel[i] = v.segment<3>(d);
+      moves = true;
+    } else {
+      x[i] = node_position(stencil[i], q, t);
+      vel[i] = node_velocity(stencil[i], v, t);
+    }
+  }
+  return moves;
+}
 
 ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::move(description)) {
   const std::string& who = desc_.name;
@@ -131,26 +106,9 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
            "mass of node " + std::to_string(i) + " must be finite and > 0 (got " + str(m) + ")");
     }
   }
+  springs_.elements.reserve(desc_.springs.size());
   for (size_t s = 0; s < desc_.springs.size(); ++s) {
-    const Spring& sp = desc_.springs[s];
-    const std::string tag = "spring " + std::to_string(s) + ": ";
-    for (int end : {sp.a, sp.b}) {
-      if (end < 0 || end >= nodes) {
-        fail(who, tag + "node " + std::to_string(end) + " out of range " + node_range(nodes));
-      }
-    }
-    if (sp.a == sp.b) fail(who, tag + "connects node " + std::to_string(sp.a) + " to itself");
-    if (!(std::isfinite(sp.k) && sp.k >= 0.0)) {
-      fail(who, tag + "stiffness k must be finite and >= 0 (got " + str(sp.k) + ")");
-    }
-    if (!(std::isfinite(sp.c) && sp.c >= 0.0)) {
-      fail(who, tag + "damping c must be finite and >= 0 (got " + str(sp.c) + ")");
-    }
-    // Zero is legal (a zero-rest-length spring, even between coincident
-    // nodes): its force k d is smooth everywhere.
-    if (!(std::isfinite(sp.rest_length) && sp.rest_length >= 0.0)) {
-      fail(who, tag + "rest length must be finite and >= 0 (got " + str(sp.rest_length) + ")");
-    }
+    springs_.elements.emplace_back(desc_.springs[s], s, nodes, who);
   }
   for (int p : desc_.pinned) {
     if (p < 0 || p >= nodes) {
@@ -194,13 +152,18 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
   for (int i = 0; i < nodes; ++i) {
     if (dof_of_node_[i] >= 0) jac.add_block(dof_of_node_[i], dof_of_node_[i], 3, 3);
   }
-  for (const Spring& sp : desc_.springs) {
-    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
-    if (da >= 0 && db >= 0) {
-      jac.add_block(da, db, 3, 3);
-      jac.add_block(db, da, 3, 3);
+  for_each_element_set([&](const auto& set) {
+    for (const auto& e : set.elements) {
+      const auto stencil = e.nodes();
+      for (int i : stencil) {
+        for (int j : stencil) {
+          if (i != j && dof_of_node_[i] >= 0 && dof_of_node_[j] >= 0) {
+            jac.add_block(dof_of_node_[i], dof_of_node_[j], 3, 3);
+          }
+        }
+      }
     }
-  }
+  });
   jacobian_pattern_ = empty_jacobians(dimensions());
   jacobian_pattern_.dF_dq = jac.build();
   jacobian_pattern_.dF_dv = jacobian_pattern_.dF_dq;
@@ -211,18 +174,21 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
       for (int r = 0; r < 3; ++r) out[r + 3 * c] = slot_of(K, row0 + r, col0 + c);
     }
   };
-  spring_slots_.resize(desc_.springs.size());
-  for (size_t s = 0; s < desc_.springs.size(); ++s) {
-    std::array<int, 36>& slots = spring_slots_[s];
-    slots.fill(-1);
-    const int da = dof_of_node_[desc_.springs[s].a], db = dof_of_node_[desc_.springs[s].b];
-    if (da >= 0) block_slots(da, da, &slots[9 * kAA]);
-    if (da >= 0 && db >= 0) {
-      block_slots(da, db, &slots[9 * kAB]);
-      block_slots(db, da, &slots[9 * kBA]);
+  for_each_element_set([&](auto& set) {
+    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    set.slots.resize(set.elements.size());
+    for (size_t k = 0; k < set.elements.size(); ++k) {
+      const auto stencil = set.elements[k].nodes();
+      auto& slots = set.slots[k];
+      slots.fill(-1);
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          const int di = dof_of_node_[stencil[i]], dj = dof_of_node_[stencil[j]];
+          if (di >= 0 && dj >= 0) block_slots(di, dj, &slots[9 * (i * n + j)]);
+        }
+      }
     }
-    if (db >= 0) block_slots(db, db, &slots[9 * kBB]);
-  }
+  });
   diagonal_slots_.resize(nv);
   for (int i = 0; i < nv; ++i) diagonal_slots_[i] = slot_of(K, i, i);
   free_mass_.resize(nv);
@@ -347,15 +313,19 @@ void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVector
     if (di < 0) continue;
     F.segment<3>(di) = desc_.masses[i] * (desc_.gravity - alpha * v.segment<3>(di));
   }
-  for (const Spring& sp : desc_.springs) {
-    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
-    if (da < 0 && db < 0) continue;  // both ends pinned: no force on any DOF
-    const Eigen::Vector3d xa = node_position(sp.a, q, t), xb = node_position(sp.b, q, t);
-    const Eigen::Vector3d vab = node_velocity(sp.b, v, t) - node_velocity(sp.a, v, t);
-    const Eigen::Vector3d fa = spring_force_on_a(sp, xa, xb, vab);
-    if (da >= 0) F.segment<3>(da) += fa;
-    if (db >= 0) F.segment<3>(db) -= fa;
-  }
+  for_each_element_set([&](const auto& set) {
+    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    Eigen::Vector3d x[n], vel[n], f[n];
+    for (const auto& e : set.elements) {
+      if (!gather(e, t, q, v, x, vel)) continue;  // every node pinned: no force on a DOF
+      e.force(x, vel, f);
+      const auto stencil = e.nodes();
+      for (int i = 0; i < n; ++i) {
+        const int di = dof_of_node_[stencil[i]];
+        if (di >= 0) F.segment<3>(di) += f[i];
+      }
+    }
+  });
 }
 
 const ForceJacobians& ParticleSystem::jacobian_pattern() const { return jacobian_pattern_; }
@@ -382,58 +352,25 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
     D[diagonal_slots_[i]] = -desc_.drag * free_mass_[i];
 
   long approximated = 0;
-  for (size_t s = 0; s < desc_.springs.size(); ++s) {
-    const Spring& sp = desc_.springs[s];
-    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
-    if (da < 0 && db < 0) continue;
-    const SpringFrame<double> f = spring_frame(node_position(sp.a, q, t), node_position(sp.b, q, t));
-
-    // S = df_a/dx_b. The damping force c ((v_b - v_a).u) u also depends on x
-    // through u; unless the request is complete that derivative is dropped
-    // (MODELS.md allows it: it only slows Newton down, the residual stays
-    // exact), which is also what keeps K symmetric.
-    Eigen::Matrix3d S;
-    if (f.collapsed) {
-      // Direction undefined. k I is the exact Jacobian of a zero-rest-length
-      // spring (force k d), the only kind that can rest collapsed; for L > 0
-      // the exact transverse stiffness diverges as l -> 0, and k I is a
-      // finite, positive semidefinite stand-in for it.
-      S = sp.k * Eigen::Matrix3d::Identity();
-      if (request.definite && sp.rest_length > 0.0 && sp.k > 0.0) ++approximated;
-    } else {
-      double transverse = 1.0 - sp.rest_length / f.l;
-      if (request.definite && transverse < 0.0) {
-        // Choi & Ko 2002: a compressed spring's negative transverse stiffness
-        // can make -K indefinite; the iteration matrix drops it.
-        transverse = 0.0;
-        if (sp.k > 0.0) ++approximated;
-      }
-      const Eigen::Matrix3d uut = f.u * f.u.transpose();
-      S = sp.k * (transverse * (Eigen::Matrix3d::Identity() - uut) + uut);
-      if (request.complete && sp.c != 0.0) {
-        // d/dd [c (w.u) u] with w = v_b - v_a and du/dd = P / l,
-        // P = I - u u^T: c (u (P w)^T + (w.u) P) / l. Unsymmetric.
-        const Eigen::Vector3d w = node_velocity(sp.b, v, t) - node_velocity(sp.a, v, t);
-        const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - uut;
-        S += (sp.c / f.l) * (f.u * (P * w).transpose() + w.dot(f.u) * P);
+  for_each_element_set([&](const auto& set) {
+    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    Eigen::Vector3d x[n], vel[n];
+    Eigen::Matrix3d Kb[n * n], Db[n * n];
+    for (size_t k = 0; k < set.elements.size(); ++k) {
+      if (!gather(set.elements[k], t, q, v, x, vel)) continue;
+      set.elements[k].jacobian_blocks(x, vel, request, Kb, Db, &approximated);
+      const auto& slots = set.slots[k];
+      for (int blk = 0; blk < n * n; ++blk) {
+        const int* bs = &slots[9 * blk];
+        if (bs[0] < 0) continue;  // the block touches a pinned node
+        // Slots are column-major within the block.
+        for (int e = 0; e < 9; ++e) {
+          K[bs[e]] += Kb[blk](e % 3, e / 3);
+          D[bs[e]] += Db[blk](e % 3, e / 3);
+        }
       }
     }
-    const Eigen::Matrix3d C = sp.c * f.u * f.u.transpose();
-
-    const std::array<int, 36>& slots = spring_slots_[s];
-    for (int blk = 0; blk < 4; ++blk) {
-      const int* bs = &slots[9 * blk];
-      if (bs[0] < 0) continue;  // block touches a pinned node
-      const double sign = kBlockSign[blk];
-      for (int e = 0; e < 9; ++e) {
-        // Slots are column-major within the block. Every block is +-df_a/dx_b
-        // (f_b = -f_a, and f_a depends on x_b - x_a only), so the same
-        // (row, col) of S serves all four even when S is unsymmetric.
-        K[bs[e]] += sign * S(e % 3, e / 3);
-        D[bs[e]] += sign * C(e % 3, e / 3);
-      }
-    }
-  }
+  });
   J->approximated_terms = approximated;
 }
 
@@ -453,46 +390,54 @@ void ParticleSystem::automatic_force_jacobians(double t, const ConstVectorRef& q
   for (size_t i = 0; i < diagonal_slots_.size(); ++i)
     D[diagonal_slots_[i]] = -desc_.drag * free_mass_[i];
 
-  for (size_t s = 0; s < desc_.springs.size(); ++s) {
-    const Spring& sp = desc_.springs[s];
-    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
-    if (da < 0 && db < 0) continue;
-    const Eigen::Vector3d xa = node_position(sp.a, q, t), xb = node_position(sp.b, q, t);
-    // A pinned node's lanes are seeded anyway (uniform code) and simply
-    // never scattered, as their slots are -1.
-    const Eigen::Vector3d va = node_velocity(sp.a, v, t), vb = node_velocity(sp.b, v, t);
-    const Vector3<SpringDual> vab = seeded(vb, kVb) - seeded(va, kVa);
-    const Vector3<SpringDual> fa =
-        spring_force_on_a<SpringDual>(sp, seeded(xa, kXa), seeded(xb, kXb), vab);
-
-    const std::array<int, 36>& slots = spring_slots_[s];
-    for (int blk = 0; blk < 4; ++blk) {
-      const int* bs = &slots[9 * blk];
-      if (bs[0] < 0) continue;
-      // Rows of node a take +df_a, rows of node b take df_b = -df_a; columns
-      // of node a read the a lanes, columns of node b the b lanes.
-      const double sign = (blk == kAA || blk == kAB) ? 1.0 : -1.0;
-      const bool column_b = blk == kAB || blk == kBB;
-      const int x_lane = column_b ? kXb : kXa;
-      const int v_lane = column_b ? kVb : kVa;
-      for (int e = 0; e < 9; ++e) {
-        const auto& derivatives = fa[e % 3].derivatives();
-        K[bs[e]] += sign * derivatives[x_lane + e / 3];
-        D[bs[e]] += sign * derivatives[v_lane + e / 3];
+  for_each_element_set([&](const auto& set) {
+    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    using Dual = ElementDual<n>;
+    Eigen::Vector3d x[n], vel[n];
+    Vector3<Dual> xd[n], vd[n], fd[n];
+    for (size_t k = 0; k < set.elements.size(); ++k) {
+      if (!gather(set.elements[k], t, q, v, x, vel)) continue;
+      // A pinned node's lanes are seeded anyway (uniform code) and simply
+      // never scattered, as their slots are -1.
+      for (int i = 0; i < n; ++i) {
+        xd[i] = seeded<n>(x[i], 3 * i);
+        vd[i] = seeded<n>(vel[i], 3 * n + 3 * i);
+      }
+      set.elements[k].force(xd, vd, fd);
+      const auto& slots = set.slots[k];
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          const int* bs = &slots[9 * (i * n + j)];
+          if (bs[0] < 0) continue;
+          // Rows of node i take df_i; columns of node j read node j's lanes.
+          for (int e = 0; e < 9; ++e) {
+            const auto& derivatives = fd[i][e % 3].derivatives();
+            K[bs[e]] += derivatives[3 * j + e / 3];
+            D[bs[e]] += derivatives[3 * n + 3 * j + e / 3];
+          }
+        }
       }
     }
-  }
+  });
   J->approximated_terms = 0;
 }
 
 std::vector<int> ParticleSystem::jacobian_colouring_hint() const {
   const auto& lattice = desc_.lattice;
   if (lattice.empty()) return {};
-  for (const Spring& sp : desc_.springs) {
-    const int span = std::abs(lattice[sp.a][0] - lattice[sp.b][0]) +
-                     std::abs(lattice[sp.a][1] - lattice[sp.b][1]);
-    if (span > 2) return {};
-  }
+  bool short_stencils = true;
+  for_each_element_set([&](const auto& set) {
+    for (const auto& e : set.elements) {
+      for (int a : e.nodes()) {
+        for (int b : e.nodes()) {
+          const int span =
+              std::abs(lattice[a][0] - lattice[b][0]) + std::abs(lattice[a][1] - lattice[b][1]);
+          if (span > 2) short_stencils = false;
+        }
+      }
+    }
+  });
+  if (!short_stencils) return {};
   const Dimensions d = dimensions();
   std::vector<int> colour(d.nx(), -1);
   for (int node = 0; node < node_count(); ++node) {
@@ -523,10 +468,15 @@ double ParticleSystem::energy(const State& s) const {
     if (di >= 0) e += 0.5 * m * v.segment<3>(di).squaredNorm();
     e -= m * desc_.gravity.dot(position(i));
   }
-  for (const Spring& sp : desc_.springs) {
-    const double stretch = (position(sp.b) - position(sp.a)).norm() - sp.rest_length;
-    e += 0.5 * sp.k * stretch * stretch;
-  }
+  for_each_element_set([&](const auto& set) {
+    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    Eigen::Vector3d x[n];
+    for (const auto& element : set.elements) {
+      const auto stencil = element.nodes();
+      for (int i = 0; i < n; ++i) x[i] = position(stencil[i]);
+      e += element.energy(x);
+    }
+  });
   return e;
 }
 

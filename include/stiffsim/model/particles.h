@@ -1,25 +1,22 @@
 #pragma once
-// Particle mass-spring systems exactly as MODELS.md defines them: lumped
-// masses, linear springs with dampers along the spring axis, pins, gravity and
-// drag. N(q) = I, M constant and diagonal, analytic symmetric K and D (and
-// complete, unsymmetric ones on request or by automatic differentiation).
+// Particle mass-spring systems exactly as MODELS.md defines them: nodes
+// (lumped masses, pins and moving pins, gravity and drag) and force
+// elements (force_element.h) on them, linear springs with dampers along the
+// spring axis so far. N(q) = I, M constant and diagonal, analytic symmetric
+// K and D (and complete, unsymmetric ones on request or by automatic
+// differentiation).
 
 #include <Eigen/Core>
 #include <array>
 #include <string>
 #include <vector>
 
+#include "stiffsim/model/force_element.h"
 #include "stiffsim/model/path.h"
+#include "stiffsim/model/spring_element.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
-
-struct Spring {
-  int a = 0, b = 0;          // node indices (pinned nodes allowed)
-  double rest_length = 0.0;  // L
-  double k = 0.0;            // stiffness, N/m
-  double c = 0.0;            // damping along the axis, N s/m
-};
 
 // A pinned node that moves: its position is its rest position plus the
 // displacement (x(t), y(t), z(t)), its velocity the paths' rates. It stays
@@ -113,15 +110,30 @@ class ParticleSystem : public System {
   Eigen::Vector3d node_position(int i, const ConstVectorRef& q, double t) const;
   Eigen::Vector3d node_velocity(int i, const ConstVectorRef& v, double t) const;
 
+  // Positions and velocities of element e's stencil at t; false when every
+  // node of it is pinned (it then acts on no degree of freedom).
+  template <typename E>
+  bool gather(const E& e, double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              Eigen::Vector3d* x, Eigen::Vector3d* vel) const;
+
   std::vector<int> dof_of_node_;  // 3*free index or -1
   std::vector<int> motion_of_node_;  // index into desc_.pin_motions or -1
   int free_nodes_ = 0;
   SparseMatrix mass_pattern_;
   ForceJacobians jacobian_pattern_;
-  // Per spring, the slots of its four 3x3 blocks (aa, ab, ba, bb) in the
-  // Jacobian patterns, -1 where a node is pinned; 9 slots per block,
-  // column-major within the block.
-  std::vector<std::array<int, 36>> spring_slots_;
+  // The force elements, one set per type, with their blocks' slots in the
+  // Jacobian patterns.
+  ElementSet<SpringElement> springs_;
+  // Calls fn on every element set: the loops over forces, Jacobians,
+  // energy and patterns are written once for every element type.
+  template <typename Fn>
+  void for_each_element_set(Fn&& fn) const {
+    fn(springs_);
+  }
+  template <typename Fn>
+  void for_each_element_set(Fn&& fn) {
+    fn(springs_);
+  }
   // Slot of every diagonal entry (i, i) of the Jacobian patterns (for drag).
   std::vector<int> diagonal_slots_;
   // Mass of every DOF (each free node's mass three times): the diagonal of M.

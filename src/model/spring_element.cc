@@ -1,0 +1,93 @@
+#include "stiffsim/model/spring_element.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "stiffsim/error.h"
+
+namespace stiffsim {
+namespace {
+
+std::string str(double x) {
+  std::ostringstream s;
+  s << x;
+  return s.str();
+}
+
+}  // namespace
+
+SpringElement::SpringElement(const Spring& spring, std::size_t index, int nodes,
+                             const std::string& who)
+    : spring_(spring) {
+  const std::string tag =
+      (who.empty() ? std::string("particles") : who) + ": spring " + std::to_string(index) + ": ";
+  for (int end : {spring.a, spring.b}) {
+    if (end < 0 || end >= nodes) {
+      throw InputError(tag + "node " + std::to_string(end) + " out of range [0, " +
+                       std::to_string(nodes) + ")");
+    }
+  }
+  if (spring.a == spring.b) {
+    throw InputError(tag + "connects node " + std::to_string(spring.a) + " to itself");
+  }
+  if (!(std::isfinite(spring.k) && spring.k >= 0.0)) {
+    throw InputError(tag + "stiffness k must be finite and >= 0 (got " + str(spring.k) + ")");
+  }
+  if (!(std::isfinite(spring.c) && spring.c >= 0.0)) {
+    throw InputError(tag + "damping c must be finite and >= 0 (got " + str(spring.c) + ")");
+  }
+  // Zero is legal (a zero-rest-length spring, even between coincident
+  // nodes): its force k d is smooth everywhere.
+  if (!(std::isfinite(spring.rest_length) && spring.rest_length >= 0.0)) {
+    throw InputError(tag + "rest length must be finite and >= 0 (got " + str(spring.rest_length) +
+                     ")");
+  }
+}
+
+void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
+                                    const JacobianRequest& request, Eigen::Matrix3d* K,
+                                    Eigen::Matrix3d* D, long* approximated) const {
+  const Spring& sp = spring_;
+  const SpringFrame<double> f = spring_frame(x[0], x[1]);
+  // S = df_a/dx_b; the blocks are -S, S, S, -S (f_b = -f_a, and f_a depends
+  // on x_b - x_a only).
+  Eigen::Matrix3d S;
+  if (f.collapsed) {
+    // Direction undefined. k I is the exact Jacobian of a zero-rest-length
+    // spring (force k d), the only kind that can rest collapsed; for L > 0
+    // the exact transverse stiffness diverges as l -> 0, and k I is a
+    // finite, positive semidefinite stand-in for it.
+    S = sp.k * Eigen::Matrix3d::Identity();
+    if (request.definite && sp.rest_length > 0.0 && sp.k > 0.0) ++*approximated;
+  } else {
+    double transverse = 1.0 - sp.rest_length / f.l;
+    if (request.definite && transverse < 0.0) {
+      // Choi & Ko 2002: a compressed spring's negative transverse stiffness
+      // can make -K indefinite; the iteration matrix drops it.
+      transverse = 0.0;
+      if (sp.k > 0.0) ++*approximated;
+    }
+    const Eigen::Matrix3d uut = f.u * f.u.transpose();
+    S = sp.k * (transverse * (Eigen::Matrix3d::Identity() - uut) + uut);
+    if (request.complete && sp.c != 0.0) {
+      // d/dd [c (w.u) u] with w = v_b - v_a and du/dd = P / l,
+      // P = I - u u^T: c (u (P w)^T + (w.u) P) / l. Unsymmetric.
+      const Eigen::Vector3d w = v[1] - v[0];
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - uut;
+      S += (sp.c / f.l) * (f.u * (P * w).transpose() + w.dot(f.u) * P);
+    }
+  }
+  const Eigen::Matrix3d C = sp.c * f.u * f.u.transpose();
+  constexpr double kSign[4] = {-1.0, +1.0, +1.0, -1.0};
+  for (int blk = 0; blk < 4; ++blk) {
+    K[blk] = kSign[blk] * S;
+    D[blk] = kSign[blk] * C;
+  }
+}
+
+double SpringElement::energy(const Eigen::Vector3d* x) const {
+  const double stretch = (x[1] - x[0]).norm() - spring_.rest_length;
+  return 0.5 * spring_.k * stretch * stretch;
+}
+
+}  // namespace stiffsim
