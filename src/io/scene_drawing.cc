@@ -33,23 +33,27 @@ class EdgeSet {
 
 ComponentDrawing draw_particles(const ParticleSystem& system,
                                 const std::vector<std::array<int, 3>>* triangles, double t,
-                                const Eigen::VectorXd& x, int q_offset) {
+                                const Eigen::VectorXd& x, int q_offset, int v_offset) {
   ComponentDrawing out;
   out.name = system.name();
   const int nodes = system.node_count();
   out.points.resize(3, nodes);
+  out.velocities.resize(3, nodes);
   for (int n = 0; n < nodes; ++n) {
     const int dof = system.dof_of_node(n);
     if (dof >= 0) {
       out.points.col(n) = x.segment<3>(q_offset + dof);
+      out.velocities.col(n) = x.segment<3>(v_offset + dof);
     } else {
       // Pins can move: where the path puts the node at t, as the forces saw it.
       out.points.col(n) = system.pinned_position(n, t);
+      out.velocities.col(n) = system.pinned_velocity(n, t);
       out.fixed.push_back(n);
     }
   }
   EdgeSet edges;
   if (triangles != nullptr) {
+    out.triangles = *triangles;
     for (const auto& tri : *triangles) {
       edges.add(tri[0], tri[1]);
       edges.add(tri[1], tri[2]);
@@ -71,7 +75,7 @@ ComponentDrawing draw_particles(const ParticleSystem& system,
 }
 
 ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
-                                  const Eigen::VectorXd& x, int q_offset) {
+                                  const Eigen::VectorXd& x, int q_offset, int v_offset) {
   ComponentDrawing out;
   out.name = system.name();
   const Eigen::VectorXd q = x.segment(q_offset, system.dimensions().nq);
@@ -99,14 +103,30 @@ ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
     joints.push_back({bu.parent, bu.child, bu.placement.translation()});
   }
 
+  // Velocities from the point kinematics where the tree offers them: each
+  // point is (body, point in its frame), body -1 an anchor on the base.
+  const Eigen::VectorXd v = x.segment(v_offset, system.dimensions().nv);
+  const bool kinematics = system.point_elements() > 0;
+  PointKinematics pk;
+  std::vector<Eigen::Vector3d> velocities;
+  auto velocity = [&](int body, const Eigen::Vector3d& local) -> Eigen::Vector3d {
+    if (body < 0) return system.root_velocity(t);
+    if (!kinematics) return Eigen::Vector3d::Zero();
+    system.point_kinematics(t, body, local, q, v, &pk);
+    return pk.p_dot;
+  };
   std::vector<Eigen::Vector3d> points;
-  for (const Pose<double>& pose : world) points.push_back(pose.p);
+  for (int i = 0; i < bodies; ++i) {
+    points.push_back(world[i].p);
+    velocities.push_back(velocity(i, Eigen::Vector3d::Zero()));
+  }
   std::vector<bool> has_child(bodies, false);
   for (const Joint& j : joints) {
     int from = j.parent;
     if (j.parent < 0) {
       from = static_cast<int>(points.size());
       points.push_back(j.origin);
+      velocities.push_back(velocity(-1, Eigen::Vector3d::Zero()));
       out.fixed.push_back(from);
     } else {
       has_child[j.parent] = true;
@@ -118,12 +138,16 @@ ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
     if (has_child[i] || com.isZero(0.0)) continue;
     out.segments.push_back({i, static_cast<int>(points.size())});
     points.push_back(world[i].p + 2.0 * (world[i].R * com));
+    velocities.push_back(velocity(i, 2.0 * com));
   }
   // A moving base carries every point, the world anchors too.
   const Eigen::Vector3d base = system.root_displacement(t);
   out.points.resize(3, static_cast<Eigen::Index>(points.size()));
-  for (size_t k = 0; k < points.size(); ++k)
+  out.velocities.resize(3, static_cast<Eigen::Index>(points.size()));
+  for (size_t k = 0; k < points.size(); ++k) {
     out.points.col(static_cast<Eigen::Index>(k)) = points[k] + base;
+    out.velocities.col(static_cast<Eigen::Index>(k)) = velocities[k];
+  }
   return out;
 }
 
@@ -141,6 +165,7 @@ std::vector<ComponentDrawing> draw_scene(
   for (int i = 0; i < scene.component_count(); ++i) {
     const System& component = scene.component(i);
     const int q_offset = scene.offsets(i).nq;
+    const int v_offset = dims.nq + scene.offsets(i).nv;
     if (const auto* particles = dynamic_cast<const ParticleSystem*>(&component)) {
       const std::vector<std::array<int, 3>>* triangles = nullptr;
       if (i < static_cast<int>(surfaces.size()) && !surfaces[i].empty()) {
@@ -154,9 +179,11 @@ std::vector<ComponentDrawing> draw_scene(
           }
         }
       }
-      out.push_back(draw_particles(*particles, triangles, t, x, q_offset));
+      out.push_back(draw_particles(*particles, triangles, t, x, q_offset, v_offset));
+      out.back().component = i;
     } else if (const auto* articulated = dynamic_cast<const ArticulatedSystem*>(&component)) {
-      out.push_back(draw_articulated(*articulated, t, x, q_offset));
+      out.push_back(draw_articulated(*articulated, t, x, q_offset, v_offset));
+      out.back().component = i;
     }
   }
   return out;

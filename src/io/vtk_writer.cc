@@ -8,8 +8,8 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/io/atomic_file.h"
+#include "stiffsim/io/scene_drawing.h"
 #include "stiffsim/io/trajectory_writer.h"
-#include "stiffsim/model/particles.h"
 
 namespace stiffsim {
 namespace {
@@ -35,17 +35,16 @@ std::string json_string(const std::string& text) {
 
 VtkWriter::VtkWriter(std::string directory, const Scene& scene,
                      const std::vector<std::vector<std::array<int, 3>>>& surfaces)
-    : directory_(std::move(directory)), scene_name_(scene.name()) {
-  const Dimensions dims = scene.dimensions();
-  state_size_ = dims.nx();
-  for (int i = 0; i < scene.component_count(); ++i) {
-    const auto* particles = dynamic_cast<const ParticleSystem*>(&scene.component(i));
-    if (particles == nullptr) continue;
-    parts_.push_back({particles, scene.offsets(i).nq, dims.nq + scene.offsets(i).nv, point_count_});
-    point_count_ += particles->node_count();
-  }
-  if (parts_.empty()) {
-    throw InputError("--vtk: scene '" + scene_name_ + "' has no particle components to draw");
+    : directory_(std::move(directory)),
+      scene_name_(scene.name()),
+      scene_(scene),
+      surfaces_(surfaces) {
+  state_size_ = scene.dimensions().nx();
+  // The topology never changes: built once from the initial drawing.
+  const std::vector<ComponentDrawing> drawing =
+      draw_scene(scene_, surfaces_, 0.0, scene.initial_state().x);
+  if (drawing.empty()) {
+    throw InputError("--vtk: scene '" + scene_name_ + "' has no components to draw");
   }
   std::error_code error;
   std::filesystem::create_directories(directory_, error);
@@ -53,45 +52,31 @@ VtkWriter::VtkWriter(std::string directory, const Scene& scene,
     throw InputError(directory_ + ": cannot create the VTK directory" +
                      (error ? " (" + error.message() + ")" : std::string()));
   }
-
-  // The connectivity never changes: build it once.
   std::string polygons, lines;
   long polygon_count = 0, line_count = 0;
-  int component = 0;
-  for (const Part& part : parts_) {
-    const int nodes = part.system->node_count();
-    const std::vector<std::array<int, 3>>* triangles = nullptr;
-    // Find this part's component index to look up its surface.
-    while (&scene.component(component) != part.system) ++component;
-    if (component < static_cast<int>(surfaces.size()) && !surfaces[component].empty()) {
-      triangles = &surfaces[component];
-      for (const auto& t : *triangles) {
-        if (t[0] < 0 || t[1] < 0 || t[2] < 0 || t[0] >= nodes || t[1] >= nodes || t[2] >= nodes) {
-          triangles = nullptr;  // not this component's numbering: draw springs instead
-          break;
-        }
-      }
-    }
-    if (triangles != nullptr) {
-      for (const auto& t : *triangles) {
+  for (const ComponentDrawing& part : drawing) {
+    const long first = point_count_;
+    if (!part.triangles.empty()) {
+      for (const auto& t : part.triangles) {
         polygons += "3";
         for (int v : t) {
           polygons.push_back(' ');
-          append_int(part.first_point + v, &polygons);
+          append_int(first + v, &polygons);
         }
         polygons.push_back('\n');
         ++polygon_count;
       }
     } else {
-      for (const Spring& s : part.system->description().springs) {
+      for (const auto& seg : part.segments) {
         lines += "2 ";
-        append_int(part.first_point + s.a, &lines);
+        append_int(first + seg[0], &lines);
         lines.push_back(' ');
-        append_int(part.first_point + s.b, &lines);
+        append_int(first + seg[1], &lines);
         lines.push_back('\n');
         ++line_count;
       }
     }
+    point_count_ += part.points.cols();
   }
   if (polygon_count > 0) {
     topology_ += "POLYGONS " + std::to_string(polygon_count) + " " +
@@ -128,36 +113,24 @@ void VtkWriter::write_frame(double t, const Eigen::VectorXd& x) {
   out += "FIELD FieldData 1\nTIME 1 1 double\n";
   append_number(t, &out);
   out += "\nPOINTS " + std::to_string(point_count_) + " double\n";
-  for (const Part& part : parts_) {
-    for (int n = 0; n < part.system->node_count(); ++n) {
-      const int dof = part.system->dof_of_node(n);
-      // A pinned node where its motion (if any) puts it at t.
-      const Eigen::Vector3d pin =
-          dof >= 0 ? Eigen::Vector3d::Zero() : part.system->pinned_position(n, t);
+  const std::vector<ComponentDrawing> drawing = draw_scene(scene_, surfaces_, t, x);
+  auto append_columns = [&out](const Eigen::Matrix3Xd& m) {
+    for (Eigen::Index n = 0; n < m.cols(); ++n) {
       for (int k = 0; k < 3; ++k) {
         if (k > 0) out.push_back(' ');
-        append_number(dof >= 0 ? x[part.q_offset + dof + k] : pin[k], &out);
+        append_number(m(k, n), &out);
       }
       out.push_back('\n');
     }
-  }
+  };
+  for (const ComponentDrawing& part : drawing) append_columns(part.points);
   out += topology_;
   out += "POINT_DATA " + std::to_string(point_count_) + "\nVECTORS velocity double\n";
-  for (const Part& part : parts_) {
-    for (int n = 0; n < part.system->node_count(); ++n) {
-      const int dof = part.system->dof_of_node(n);
-      for (int k = 0; k < 3; ++k) {
-        if (k > 0) out.push_back(' ');
-        append_number(dof >= 0 ? x[part.v_offset + dof + k] : part.system->pinned_velocity(n, t)[k],
-                      &out);
-      }
-      out.push_back('\n');
-    }
-  }
+  for (const ComponentDrawing& part : drawing) append_columns(part.velocities);
   out += "SCALARS component int 1\nLOOKUP_TABLE default\n";
-  for (size_t p = 0; p < parts_.size(); ++p) {
-    for (int n = 0; n < parts_[p].system->node_count(); ++n) {
-      append_int(static_cast<long>(p), &out);
+  for (const ComponentDrawing& part : drawing) {
+    for (Eigen::Index n = 0; n < part.points.cols(); ++n) {
+      append_int(part.component, &out);
       out.push_back('\n');
     }
   }

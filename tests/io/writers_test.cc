@@ -18,6 +18,7 @@
 #include "stiffsim/io/stats_writer.h"
 #include "stiffsim/io/trajectory_writer.h"
 #include "stiffsim/io/vtk_writer.h"
+#include "stiffsim/model/articulated.h"
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
 #include "stiffsim/scene.h"
@@ -245,6 +246,54 @@ TEST(VtkWriter, FramesHoldAllNodesAndTheSeriesListsTimes) {
   for (const auto& e : fs::directory_iterator(dir.file("frames"))) {
     EXPECT_NE(e.path().extension(), ".tmp") << e.path();
   }
+}
+
+TEST(VtkWriter, TreesAreDrawnWithTheirPointsVelocities) {
+  // A 2-link chain beside a rope: the chain's points are its two body
+  // origins, its world anchor and the tip of its last link (scene_drawing.h),
+  // joined by three lines; their velocities are the point kinematics'.
+  TempDir dir;
+  RopeSpec rope;
+  rope.name = "rope";
+  rope.nodes = 3;
+  rope.stretch = SpringParameters{10.0, 0.1};
+  std::vector<std::unique_ptr<System>> components;
+  components.push_back(std::make_unique<ParticleSystem>(make_rope(rope)));
+  auto chain = std::make_unique<ArticulatedSystem>(make_chain_tree(2), ArticulatedOptions{});
+  const ArticulatedSystem& arm = *chain;
+  components.push_back(std::move(chain));
+  const Scene scene("mixed", std::move(components));
+  VtkWriter writer(dir.file("frames"), scene);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(scene.dimensions().nx());
+  const Dimensions d = scene.dimensions();
+  const int q_arm = scene.offsets(1).nq, v_arm = d.nq + scene.offsets(1).nv;
+  x[q_arm] = 0.3;
+  x[q_arm + 1] = -0.2;
+  x[v_arm] = 1.5;
+  x[v_arm + 1] = -0.5;
+  writer.write_frame(0.0, x);
+  writer.finish();
+  const std::vector<std::string> frame = lines(read(dir.file("frames/mixed_00000.vtk")));
+  const auto at = [&](const std::string& line) {
+    return std::find(frame.begin(), frame.end(), line) - frame.begin();
+  };
+  ASSERT_LT(at("POINTS 7 double"), static_cast<long>(frame.size()));  // 3 nodes + 4
+  EXPECT_LT(at("LINES 5 15"), static_cast<long>(frame.size()));       // 2 springs + 3
+  const long velocity = at("VECTORS velocity double");
+  ASSERT_LT(velocity + 7, static_cast<long>(frame.size()));
+  // Point 3 + 1 is the second body's origin, point 3 + 3 the chain's tip.
+  PointKinematics pk;
+  const Eigen::VectorXd q = x.segment(q_arm, 2), v = x.segment(v_arm, 2);
+  arm.point_kinematics(0.0, 1, Eigen::Vector3d::Zero(), q, v, &pk);
+  std::istringstream second(frame[velocity + 1 + 3 + 1]);
+  Eigen::Vector3d read_back;
+  second >> read_back[0] >> read_back[1] >> read_back[2];
+  EXPECT_EQ(read_back, pk.p_dot);
+  EXPECT_GT(pk.p_dot.norm(), 0.1);
+  const long component = at("SCALARS component int 1");
+  ASSERT_LT(component + 8, static_cast<long>(frame.size()));
+  EXPECT_EQ(frame[component + 2], "0");      // the rope
+  EXPECT_EQ(frame[component + 2 + 3], "1");  // the chain: its scene index
 }
 
 TEST(VtkWriter, IncompleteSeriesSaysWhy) {

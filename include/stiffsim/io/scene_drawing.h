@@ -34,8 +34,16 @@ namespace stiffsim {
 
 struct ComponentDrawing {
   std::string name;                          // the component's name
+  int component = 0;                         // its index in the scene
   Eigen::Matrix3Xd points;                   // world positions, m
+  // World velocities of the points, m/s: a node's; a tree's from its point
+  // kinematics (zero on trees that offer none: floating, planar or
+  // compliant), an anchor's its base's.
+  Eigen::Matrix3Xd velocities;
   std::vector<std::array<int, 2>> segments;  // pairs of point indices
+  // The surface triangles drawn (in point numbering), where the component
+  // has a valid surface; its segments are then their edges.
+  std::vector<std::array<int, 3>> triangles;
   // Points held by the world: pinned nodes (moving or not), joint anchors.
   std::vector<int> fixed;
 };

@@ -1,9 +1,11 @@
 #pragma once
 // Mesh frames for ParaView: one legacy VTK PolyData file (ASCII)
-// DIR/<scene>_<NNNNN>.vtk per sample with every particle node (pinned ones at
-// their fixed positions) as POINTS, surfaces as POLYGONS (cloth grids, OBJ
-// meshes) or springs as LINES (ropes), and the node velocities and component
-// index as point data. DIR/<scene>.vtk.series lists the frames with their
+// DIR/<scene>_<NNNNN>.vtk per sample holding the scene's drawing
+// (scene_drawing.h: every particle node, pinned ones where their paths put
+// them, and the bodies of URDF trees) as POINTS, surfaces as POLYGONS (cloth
+// grids, OBJ meshes) and the other segments as LINES (a rope's stretch
+// springs, a tree's links), with the points' velocities and component index
+// (in the scene) as point data. DIR/<scene>.vtk.series lists the frames with their
 // times; ParaView (5.5 and later) opens it as one time-dependent dataset.
 //
 // Why not a .pvd: ParaView's PVD reader (vtkXMLCollectionReader) only
@@ -23,8 +25,6 @@
 
 namespace stiffsim {
 
-class ParticleSystem;
-
 class VtkWriter : public FileSink {
  public:
   // As a run's sink every sample is a frame; the run's end finishes the file.
@@ -35,9 +35,9 @@ class VtkWriter : public FileSink {
 
   // `surfaces`, if given, holds per component of `scene` its triangles in the
   // component's node numbering (SceneConfig::surfaces); components without
-  // triangles are drawn as their springs. Creates `directory` if needed.
-  // Throws InputError if the directory cannot be created or the scene has no
-  // particle component to draw.
+  // triangles are drawn as their segments. Creates `directory` if needed.
+  // Throws InputError if the directory cannot be created or the scene has
+  // nothing to draw. The scene must outlive the writer.
   VtkWriter(std::string directory, const Scene& scene,
             const std::vector<std::vector<std::array<int, 3>>>& surfaces = {});
 
@@ -55,18 +55,13 @@ class VtkWriter : public FileSink {
   std::string frame_path(long index) const;
 
  private:
-  struct Part {
-    const ParticleSystem* system;
-    int q_offset;  // of the component's slice in the scene's q
-    int v_offset;  // in the scene's x (nq + the component's v offset)
-    int first_point;
-  };
   void write_series(const std::string& reason);
 
   std::string directory_;
   std::string scene_name_;
-  std::vector<Part> parts_;
-  int point_count_ = 0;
+  const Scene& scene_;
+  std::vector<std::vector<std::array<int, 3>>> surfaces_;
+  long point_count_ = 0;
   long state_size_ = 0;
   std::string topology_;  // POLYGONS / LINES and the constant point data, same in every frame
   std::vector<double> times_;
