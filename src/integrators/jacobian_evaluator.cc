@@ -185,7 +185,7 @@ void JacobianEvaluator::check_structure(const ForceJacobians& J) const {
 }
 
 void JacobianEvaluator::evaluate_rates(double t, const Eigen::VectorXd& x,
-                                       Eigen::VectorXd* f) const {
+                                       Eigen::VectorXd* f) {
   const auto q = x.segment(0, dims_.nq);
   const auto v = x.segment(dims_.nq, dims_.nv);
   const auto z = x.segment(dims_.nq + dims_.nv, dims_.nz);

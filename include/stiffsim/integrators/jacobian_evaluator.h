@@ -53,7 +53,7 @@ class JacobianEvaluator {
 
  private:
   // (F, f_z) at (t, x) into f, both stacked as in the Jacobian's rows.
-  void evaluate_rates(double t, const Eigen::VectorXd& x, Eigen::VectorXd* f) const;
+  void evaluate_rates(double t, const Eigen::VectorXd& x, Eigen::VectorXd* f);
   // For every column j of colour `colour`: writes (f_plus - f_minus) / step_j
   // into the stored entries of column j in every block of J.
   void store_columns(int colour, const Eigen::VectorXd& f_plus, const Eigen::VectorXd& f_minus,
@@ -77,8 +77,8 @@ class JacobianEvaluator {
   std::vector<int> colour_start_, columns_by_colour_;
   // JacobianRequest::acceleration of the evaluation in progress (differences
   // only), and M's scratch for it.
-  mutable const double* acceleration_ = nullptr;
-  mutable SparseMatrix mass_;
+  const double* acceleration_ = nullptr;
+  SparseMatrix mass_;
   // The pattern's structure, to check that J keeps it.
   std::vector<Eigen::Index> pattern_nonzeros_;
   // Workspaces: perturbed state, rates and exact increments.
