@@ -15,6 +15,16 @@ std::unique_ptr<ArticulatedSystem> make_compliant(const RigidTree& tree, const A
                        "': bushing k_lin, c_lin, k_ang and c_ang must be finite and >= 0");
     }
   }
+  // The free bodies would carry neither: refused rather than dropped (the
+  // scene loader says so first, with the line).
+  if (exact.root_motion) {
+    throw InputError("component '" + tree.name +
+                     "': root_motion needs the exact formulation (formulation: exact)");
+  }
+  if (!exact.drives.empty()) {
+    throw InputError("component '" + tree.name +
+                     "': drives need the exact formulation (formulation: exact)");
+  }
   // The exact coordinates place the free bodies (the exact system itself is
   // not built: for a long chain its dense patterns cost more than the run).
   const int nb = static_cast<int>(tree.bodies.size());

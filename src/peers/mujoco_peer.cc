@@ -53,6 +53,16 @@ MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string&
                                 "' has bushings; only exact trees map to MuJoCo's joints");
   const ArticulatedModel& model = system.model();
   const ArticulatedOptions& options = system.options();
+  // A constant root displacement leaves q and v as they are; a moving base
+  // would need MuJoCo's world to move, which the peer does not do, and
+  // comparing against a fixed base would report a false disagreement.
+  if (options.root_motion) {
+    for (const ScalarPath& axis : *options.root_motion) {
+      if (!axis.is_constant())
+        throw std::invalid_argument("MuJoCo peer: '" + system.name() +
+                                    "' has a moving root (root_motion); MuJoCo's base stays put");
+    }
+  }
   MujocoProblem problem;
   problem.urdf_path = urdf_path;
   for (int k = 0; k < 3; ++k) problem.gravity[k] = options.gravity[k];

@@ -35,6 +35,23 @@ TEST(MujocoPeer, CompliantSystemHasNoMujocoProblem) {
   EXPECT_THROW(mujoco_problem(*sys, kModels + "chain_2.urdf"), std::invalid_argument);
 }
 
+TEST(MujocoPeer, MovingRootHasNoMujocoProblem) {
+  // A base held at a constant offset moves nothing MuJoCo would see; a
+  // shaken one would be compared against a still MuJoCo base.
+  const RigidTree tree = load_urdf(kModels + "chain_2.urdf", UrdfOptions{"chain", false}, nullptr);
+  ArticulatedOptions o;
+  o.root_motion = {ScalarPath::constant(0.2), ScalarPath::constant(0.0),
+                   ScalarPath::constant(-0.1)};
+  EXPECT_NO_THROW(mujoco_problem(ArticulatedSystem(tree, o), kModels + "chain_2.urdf"));
+  (*o.root_motion)[1] = ScalarPath::sinusoid(0.0, 0.01, 2.0, 0.0, "y");
+  try {
+    mujoco_problem(ArticulatedSystem(tree, o), kModels + "chain_2.urdf");
+    ADD_FAILURE() << "a shaken base was mapped";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("moving root"), std::string::npos) << e.what();
+  }
+}
+
 #ifndef STIFFSIM_HAVE_MUJOCO
 
 TEST(MujocoPeer, UnavailableWithoutMujoco) {

@@ -25,7 +25,8 @@ struct BushingParameters {
 // `tree` and the initial state in the exact formulation's coordinates: the
 // free bodies start where the exact tree's bodies are, with their
 // velocities. Floating joints of the tree stay free (no bushing). Throws
-// InputError for bad parameters (negative or non-finite).
+// InputError for bad parameters (negative or non-finite) and for drives or
+// a root motion, which act on the exact formulation only.
 std::unique_ptr<ArticulatedSystem> make_compliant(const RigidTree& tree, const ArticulatedOptions& exact,
                                                   const BushingParameters& bushing);
 

@@ -48,7 +48,8 @@ class ArticulatedSystem;
 // springs, total damping, gravity and initial state. Integrator, step, end
 // time and samples are left at their defaults for the caller. Throws
 // std::invalid_argument for what MuJoCo's URDF import cannot represent the
-// same way (planar joints, a floating joint below the root, bushings).
+// same way (planar joints, a floating joint below the root, bushings, a
+// root motion that moves).
 MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string& urdf_path);
 
 // Runs the problem. Joint limits, contacts and MuJoCo's default armature are
