@@ -1,15 +1,22 @@
 // The scene key root_motion on URDF components: the shipped shaken chain
-// loads and its base follows the sinusoid, and bad uses are refused with
-// the line that holds them.
+// loads and its base follows the sinusoid, its drawing is the still
+// chain's carried along the path, and bad uses are refused with the line
+// that holds them.
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "stiffsim/error.h"
+#include "stiffsim/io/scene_drawing.h"
 #include "stiffsim/io/scene_yaml.h"
 #include "stiffsim/model/articulated.h"
+#include "stiffsim/model/rigid_tree.h"
 
 namespace stiffsim {
 namespace {
@@ -27,6 +34,34 @@ TEST(SceneYamlRootMotion, TheShakenChainsBaseFollowsItsSinusoid) {
     EXPECT_NEAR(chain->root_velocity(t).x(), 0.05 * 4.0 * M_PI * std::cos(4.0 * M_PI * t), 1e-13);
     EXPECT_EQ(chain->root_displacement(t).tail<2>(), Eigen::Vector2d::Zero());
   }
+}
+
+TEST(SceneYamlRootMotion, TheDrawingIsTheStillChainCarriedAlongThePath) {
+  // Same state, base shaken or still: every point (world anchor included)
+  // moves by d(t) and gains d'(t); the segments are the same.
+  auto scene = [](std::optional<std::array<ScalarPath, 3>> motion) {
+    ArticulatedOptions o;
+    o.root_motion = std::move(motion);
+    std::vector<std::unique_ptr<System>> parts;
+    parts.push_back(std::make_unique<ArticulatedSystem>(make_chain_tree(3, "chain"), o));
+    return std::make_unique<Scene>("chain", std::move(parts));
+  };
+  const double A = 0.05, f = 2.0, w = 2.0 * M_PI * f;
+  const auto shaken =
+      scene(std::array<ScalarPath, 3>{ScalarPath::sinusoid(0.0, A, f, 0.0, "x"),
+                                      ScalarPath::constant(0.1), ScalarPath::constant(0.0)});
+  const auto still = scene(std::nullopt);
+  Eigen::VectorXd x(6);
+  x << 0.3, -0.2, 0.5, 1.0, -0.7, 0.4;
+  const double t = 0.1;
+  const Eigen::Vector3d d(A * std::sin(w * t), 0.1, 0.0), d_dot(A * w * std::cos(w * t), 0.0, 0.0);
+  const ComponentDrawing a = draw_scene(*shaken, {}, t, x).at(0);
+  const ComponentDrawing b = draw_scene(*still, {}, t, x).at(0);
+  ASSERT_EQ(a.points.cols(), b.points.cols());
+  EXPECT_EQ(a.segments, b.segments);
+  EXPECT_EQ(a.fixed, b.fixed);
+  EXPECT_LT((a.points - (b.points.colwise() + d)).cwiseAbs().maxCoeff(), 1e-15);
+  EXPECT_LT((a.velocities - (b.velocities.colwise() + d_dot)).cwiseAbs().maxCoeff(), 1e-14);
 }
 
 std::string error(const std::string& motion, const std::string& formulation = "exact",
