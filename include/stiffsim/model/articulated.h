@@ -184,13 +184,14 @@ class ArticulatedSystem : public System {
   Eigen::Vector3d root_velocity(double t) const;
   int body_q_offset(int body) const { return model_.q_offset[body]; }
   int body_v_offset(int body) const { return model_.v_offset[body]; }
-  // Poses of every body in the world.
+  // Poses of every body in the world; with a root motion, in the base's
+  // frame (add root_displacement(t): the state alone does not know t).
   std::vector<Pose<double>> world_poses(const Eigen::VectorXd& q) const;
   // Spatial velocity of every body in its own coordinates.
   std::vector<Vec6<double>> body_velocities(const Eigen::VectorXd& q,
                                             const Eigen::VectorXd& v) const;
   // Total momentum in the world frame: angular about the world origin, then
-  // linear.
+  // linear (with a root motion, of the motion relative to the base).
   Vec6<double> world_momentum(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const;
   // Kinetic energy alone.
   double kinetic_energy(const Eigen::VectorXd& q, const Eigen::VectorXd& v) const;
