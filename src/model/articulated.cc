@@ -1,14 +1,17 @@
 #include "stiffsim/model/articulated.h"
 
-#include <unsupported/Eigen/AutoDiff>
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <unsupported/Eigen/AutoDiff>
 
 #include "stiffsim/error.h"
 #include "stiffsim/linalg/column_colouring.h"
 #include "stiffsim/model/articulated_body_solver.h"
+#include "stiffsim/model/bushing.h"
 #include "stiffsim/model/bushing_derivatives.h"
+#include "stiffsim/model/composite_rigid_body.h"
+#include "stiffsim/model/forward_kinematics.h"
 #include "stiffsim/model/inverse_dynamics.h"
 #include "stiffsim/model/joints.h"
 #include "stiffsim/model/quaternion.h"
@@ -29,174 +32,6 @@ using VecX = Eigen::Matrix<T, Eigen::Dynamic, 1>;
 
 std::string where(const RigidTree& tree) { return "component '" + tree.name + "'"; }
 
-// World pose and world velocities (of the origin, and angular) of a free root
-// body from its q and v slices.
-template <typename T>
-struct FreeBodyState {
-  Pose<T> pose;
-  Vec3<T> velocity, omega;  // world frame
-};
-
-template <typename T, typename Q, typename V>
-FreeBodyState<T> free_body_state(const Q& q, const V& v, int qo, int vo) {
-  FreeBodyState<T> s;
-  Eigen::Matrix<T, 4, 1> quat = q.template segment<4>(qo + 3).template cast<T>();
-  s.pose.R = quaternion_rotation<T>(quat);
-  s.pose.p = q.template segment<3>(qo).template cast<T>();
-  s.velocity = v.template segment<3>(vo).template cast<T>();
-  s.omega = s.pose.R * Vec3<T>(v.template segment<3>(vo + 3).template cast<T>());
-  return s;
-}
-
-// Adds a world force f at world point x and a world moment m on a free root
-// body to its generalized forces (linear velocity in the world, angular in
-// the body frame).
-template <typename T>
-void apply_wrench(const FreeBodyState<T>& s, const Vec3<T>& x, const Vec3<T>& f, const Vec3<T>& m,
-                  int vo, VecX<T>* F) {
-  F->template segment<3>(vo) += f;
-  const Vec3<T> arm = x - s.pose.p;
-  F->template segment<3>(vo + 3) += s.pose.R.transpose() * (arm.cross(f) + m);
-}
-
-// A unit direction perpendicular to the unit axis n, for joint angles.
-Eigen::Vector3d reference_direction(const Eigen::Vector3d& n) {
-  Eigen::Vector3d e1, e2;
-  planar_basis(n, &e1, &e2);
-  return e1;
-}
-
-// The relative state of a bushing's two frames.
-template <typename T>
-struct BushingFrames {
-  FreeBodyState<T> a, b;  // a: the parent (the world at rest when parent < 0)
-  Mat3<T> RJ;             // joint frame orientation in the world
-  Vec3<T> xJ;             // joint frame origin in the world
-  Vec3<T> n;              // joint axis in the world (fixed to the parent)
-};
-
-template <typename T, typename Q, typename V>
-BushingFrames<T> bushing_frames(const Bushing& bu, const Q& q, const V& v,
-                                const std::vector<int>& qo, const std::vector<int>& vo) {
-  BushingFrames<T> fr;
-  if (bu.parent >= 0) {
-    fr.a = free_body_state<T>(q, v, qo[bu.parent], vo[bu.parent]);
-  } else {
-    fr.a.velocity.setZero();
-    fr.a.omega.setZero();
-  }
-  fr.b = free_body_state<T>(q, v, qo[bu.child], vo[bu.child]);
-  fr.RJ = fr.a.pose.R * bu.placement.linear().cast<T>();
-  fr.xJ = fr.a.pose.p + fr.a.pose.R * bu.placement.translation().cast<T>();
-  fr.n = fr.RJ * bu.axis.cast<T>();
-  return fr;
-}
-
-template <typename T>
-T bushing_angle(const Bushing& bu, const BushingFrames<T>& fr, Vec3<T>* gradient_child) {
-  using std::atan2;
-  const Eigen::Vector3d e = reference_direction(bu.axis);
-  const Vec3<T> ea = fr.RJ * e.cast<T>();
-  const Vec3<T> eb = fr.b.pose.R * e.cast<T>();
-  const T x = ea.dot(eb);
-  const T y = fr.n.dot(ea.cross(eb));
-  if (gradient_child) {
-    // d theta / d phi_child for a small world rotation phi of the child; the
-    // parent's is its negative (theta is invariant under a common rotation).
-    const Vec3<T> dx = eb.cross(ea);
-    const Vec3<T> dy = eb.cross(Vec3<T>(fr.n.cross(ea)));
-    *gradient_child = (x * dy - y * dx) / (x * x + y * y);
-  }
-  return atan2(y, x);
-}
-
-// Adds bushing `bu`'s generalized forces to F.
-template <typename T, typename Q, typename V>
-void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::vector<int>& qo,
-                        const std::vector<int>& vo, VecX<T>* F) {
-  const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, qo, vo);
-  const BushingProjector g = bushing_projector(bu.type);
-  const Vec3<T>& n = fr.n;
-  const Vec3<T> d = fr.b.pose.p - fr.xJ;
-  const T nd = n.dot(d);
-  // Relative velocities at the joint: of the child origin against the parent
-  // point under it, and angular.
-  const Vec3<T> dv = fr.b.velocity - (fr.a.velocity + fr.a.omega.cross(Vec3<T>(fr.b.pose.p - fr.a.pose.p)));
-  const Vec3<T> dw = fr.b.omega - fr.a.omega;
-
-  // Linear: the child's force at its origin (the parent takes the opposite
-  // at the same point, which lies on both bodies' lines of action, plus the
-  // moment from the axis it carries).
-  Vec3<T> f = -T(bu.k_lin) * (T(g.alpha) * d + T(g.beta) * nd * n) -
-              T(bu.c_lin) * (T(g.alpha) * dv + T(g.beta) * n.dot(dv) * n);
-  Vec3<T> m_parent = -T(bu.k_lin * g.beta) * nd * n.cross(d);
-  Vec3<T> m_child = Vec3<T>::Zero();
-
-  // Angular.
-  if (g.tilt_only) {
-    const Vec3<T> nb = fr.b.pose.R * bu.axis.cast<T>();
-    m_child += T(bu.k_ang) * nb.cross(n);
-    m_parent += T(bu.k_ang) * n.cross(nb);
-    const Vec3<T> dw_perp = dw - n.dot(dw) * n;
-    m_child -= T(bu.c_ang) * dw_perp;
-    m_parent += T(bu.c_ang) * dw_perp;
-  } else {
-    const Mat3<T> S = fr.b.pose.R * fr.RJ.transpose();
-    Vec3<T> axial;
-    axial << S(2, 1) - S(1, 2), S(0, 2) - S(2, 0), S(1, 0) - S(0, 1);
-    m_child -= T(0.5 * bu.k_ang) * axial;
-    m_parent += T(0.5 * bu.k_ang) * axial;
-    m_child -= T(bu.c_ang) * dw;
-    m_parent += T(bu.c_ang) * dw;
-  }
-
-  // The free coordinate's spring and damper.
-  const JointForce& jf = bu.joint;
-  if (bu.type == JointType::kRevolute && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
-    Vec3<T> grad;
-    const T theta = bushing_angle<T>(bu, fr, &grad);
-    const T torque = -T(jf.stiffness) * (theta - T(jf.rest));
-    m_child += torque * grad;
-    m_parent -= torque * grad;
-    const Vec3<T> damp = -T(jf.damping) * n.dot(dw) * n;
-    m_child += damp;
-    m_parent -= damp;
-  } else if (bu.type == JointType::kPrismatic && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
-    const T s_force = -T(jf.stiffness) * (nd - T(jf.rest));
-    f += s_force * n - T(jf.damping) * n.dot(dv) * n;
-    // E = k/2 (n.d - rest)^2 also turns with the parent's axis.
-    m_parent += s_force * n.cross(d);
-  }
-
-  apply_wrench<T>(fr.b, fr.b.pose.p, f, m_child, vo[bu.child], F);
-  if (bu.parent >= 0) {
-    apply_wrench<T>(fr.a, fr.b.pose.p, Vec3<T>(-f), m_parent, vo[bu.parent], F);
-  }
-}
-
-// The potential of bushing `bu` (velocities do not enter it: `rest` is any
-// velocity vector of the right size).
-double bushing_energy(const Bushing& bu, const Eigen::VectorXd& q, const Eigen::VectorXd& rest,
-                      const std::vector<int>& qo, const std::vector<int>& vo) {
-  const BushingFrames<double> fr = bushing_frames<double>(bu, q, rest, qo, vo);
-  const BushingProjector g = bushing_projector(bu.type);
-  const Eigen::Vector3d d = fr.b.pose.p - fr.xJ;
-  const double nd = fr.n.dot(d);
-  double e = 0.5 * bu.k_lin * (g.alpha * d.squaredNorm() + g.beta * nd * nd);
-  if (g.tilt_only) {
-    e += bu.k_ang * (1.0 - fr.n.dot(fr.b.pose.R * bu.axis));
-  } else {
-    e += 0.5 * bu.k_ang * (3.0 - (fr.b.pose.R * fr.RJ.transpose()).trace());
-  }
-  if (bu.type == JointType::kRevolute) {
-    const double theta = bushing_angle<double>(bu, fr, nullptr);
-    e += 0.5 * bu.joint.stiffness * (theta - bu.joint.rest) * (theta - bu.joint.rest);
-  } else if (bu.type == JointType::kPrismatic) {
-    e += 0.5 * bu.joint.stiffness * (nd - bu.joint.rest) * (nd - bu.joint.rest);
-  }
-  return e;
-}
-
 bool is_free_root(const TreeBody& b) {
   return b.parent < 0 && b.type == JointType::kFloating &&
          b.placement.isApprox(Eigen::Isometry3d::Identity(), 0.0);
@@ -212,19 +47,6 @@ struct ArticulatedSystem::DualWorkspace {
 };
 
 ArticulatedSystem::~ArticulatedSystem() = default;
-
-std::vector<SpatialInertia> body_inertias(const RigidTree& tree) {
-  std::vector<SpatialInertia> out;
-  out.reserve(tree.bodies.size());
-  for (const TreeBody& b : tree.bodies) {
-    SpatialInertia I;
-    I.mass = b.inertia.mass;
-    I.com = b.inertia.com;
-    I.inertia_com = b.inertia.inertia;
-    out.push_back(I);
-  }
-  return out;
-}
 
 ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     : options_(std::move(options)) {
@@ -372,9 +194,7 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   }
   data_ = std::make_unique<ArticulatedData<double>>(model_);
   acceleration_.resize(dims_.nv);
-  composite_.resize(nb);
-  transform_.resize(nb);
-  subspace_.resize(nb);
+  crba_ = std::make_unique<CompositeRigidBodyData>(model_);
 
   PatternBuilder Np(dims_.nq, dims_.nv);
   for (int i = 0; i < nb; ++i) {
@@ -444,19 +264,7 @@ const ArticulatedSystem::Patterns& ArticulatedSystem::patterns() const {
     P->jacobians.dF_dq = K.build();
     P->jacobians.dF_dv = D.build();
 
-    // The slots of M's entries in the order mass_matrix() writes them.
-    for (int i = 0; i < nb; ++i) {
-      const int ni = joint_nv(model_.tree.bodies[i].type);
-      for (int j : related[i]) {
-        const int nj = joint_nv(model_.tree.bodies[j].type);
-        for (int a = 0; a < nj; ++a) {
-          for (int b = 0; b < ni; ++b) {
-            P->mass_slots.push_back(slot_of(P->mass, model_.v_offset[j] + a, model_.v_offset[i] + b));
-            P->mass_slots.push_back(slot_of(P->mass, model_.v_offset[i] + b, model_.v_offset[j] + a));
-          }
-        }
-      }
-    }
+    P->mass_slots = composite_rigid_body_slots(model_, P->mass);
 
     const long dense = static_cast<long>(dims_.nv) * (dims_.nq + dims_.nv);
     if (P->jacobians.dF_dq.nonZeros() + P->jacobians.dF_dv.nonZeros() == dense) {
@@ -579,45 +387,7 @@ bool ArticulatedSystem::project_positions(VectorRef q) const {
 }
 
 void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
-  // Composite rigid body algorithm: the inertia of every subtree in its root
-  // body's frame, then M_ji = S_j^T X^T ... X^T Ic_i S_i along the path from i
-  // to the root. Only related pairs are visited: the tree's branch sparsity.
-  const int nb = model_.bodies();
-  const std::vector<int>& slots = patterns().mass_slots;
-  std::vector<Eigen::Matrix<double, 6, 6>>& Ic = composite_;
-  std::vector<Eigen::Matrix<double, 6, 6>>& X = transform_;
-  std::vector<MotionSubspace<double>>& S = subspace_;
-  for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = model_.tree.bodies[i];
-    const JointMotion<double> jm =
-        body_joint_motion<double>(model_, i, q.segment(model_.q_offset[i], joint_nq(b.type)));
-    S[i] = jm.S;
-    X[i] = motion_transform_matrix(jm.pose);
-    Ic[i] = model_.inertia_matrix[i];
-  }
-  for (int i = nb - 1; i >= 0; --i) {
-    const int p = model_.tree.bodies[i].parent;
-    if (p >= 0) Ic[p].noalias() += X[i].transpose() * Ic[i] * X[i];
-  }
-  double* values = M->valuePtr();
-  std::size_t slot = 0;
-  Eigen::Matrix<double, 6, Eigen::Dynamic, 0, 6, 6> Fm;
-  for (int i = 0; i < nb; ++i) {
-    Fm = Ic[i] * S[i];
-    for (int j = i;;) {
-      const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6> block = S[j].transpose() * Fm;
-      for (int a = 0; a < block.rows(); ++a) {
-        for (int b = 0; b < block.cols(); ++b) {
-          values[slots[slot++]] = block(a, b);
-          values[slots[slot++]] = block(a, b);
-        }
-      }
-      const int p = model_.tree.bodies[j].parent;
-      if (p < 0) break;
-      Fm = X[j].transpose() * Fm;
-      j = p;
-    }
-  }
+  composite_rigid_body(model_, q, patterns().mass_slots, crba_.get(), M);
 }
 
 template <typename T, typename Positions, typename Velocities>
@@ -749,26 +519,6 @@ void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef
                                                   ForceJacobians* J) const {
   (void)z;
   exact_jacobians(t, q, v, request.acceleration, J);
-}
-
-void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
-                        std::vector<Pose<double>>* world, std::vector<Vec6<double>>* velocities) {
-  const int nb = static_cast<int>(tree.bodies.size());
-  world->resize(nb);
-  if (velocities) velocities->resize(nb);
-  int qo = 0, vo = 0;
-  for (int i = 0; i < nb; ++i) {
-    const TreeBody& b = tree.bodies[i];
-    const JointMotion<double> jm = joint_motion<double>(b, q.segment(qo, joint_nq(b.type)));
-    (*world)[i] = b.parent < 0 ? jm.pose : compose((*world)[b.parent], jm.pose);
-    if (velocities) {
-      const Vec6<double> vJ = jm.S * v->segment(vo, joint_nv(b.type));
-      (*velocities)[i] =
-          b.parent < 0 ? vJ : Vec6<double>(motion_to_child<double>(jm.pose, (*velocities)[b.parent]) + vJ);
-    }
-    qo += joint_nq(b.type);
-    vo += joint_nv(b.type);
-  }
 }
 
 std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {

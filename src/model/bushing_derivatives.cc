@@ -63,20 +63,6 @@ SparseMatrix forest_pattern(const RigidTree& tree, const std::vector<int>& q_off
 
 }  // namespace
 
-BushingProjector bushing_projector(JointType type) {
-  switch (type) {
-    case JointType::kRevolute:
-      return {1.0, 0.0, true};
-    case JointType::kPrismatic:
-      return {1.0, -1.0, false};
-    case JointType::kPlanar:
-      return {0.0, 1.0, true};
-    case JointType::kFloating:
-      break;
-  }
-  return {0.0, 0.0, true};
-}
-
 BushingDerivatives::BushingDerivatives(const ArticulatedSystem& system)
     : bushings_(system.options().bushings),
       q_offset_(system.model().q_offset),

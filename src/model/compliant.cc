@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "stiffsim/error.h"
+#include "stiffsim/model/forward_kinematics.h"
 #include "stiffsim/model/quaternion.h"
 
 namespace stiffsim {

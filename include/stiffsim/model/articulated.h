@@ -2,12 +2,16 @@
 // Articulated rigid bodies (MODELS.md "Articulated bodies from URDF") as a
 // System, in either formulation:
 // - exact: the RigidTree in reduced coordinates. M(q) by the composite rigid
-//   body algorithm, which touches only the pairs of bodies on one branch (the
-//   tree's branch sparsity is M's pattern); F = tau_joint - C(q, v) - g(q) by
-//   the recursive Newton-Euler algorithm.
+//   body algorithm (composite_rigid_body.h), which touches only the pairs of
+//   bodies on one branch (the tree's branch sparsity is M's pattern);
+//   F = tau_joint - C(q, v) - g(q) by the recursive Newton-Euler algorithm
+//   (inverse_dynamics.h).
 // - compliant (make_compliant in compliant.h): a forest of free bodies, each
-//   with a floating joint to the world, held together by Bushings; M is block
-//   diagonal and K, D are block tridiagonal for a chain.
+//   with a floating joint to the world, held together by Bushings
+//   (bushing.h); M is block diagonal and K, D are block tridiagonal for a
+//   chain.
+// This class holds what the two share: validation, patterns, drives, the
+// root motion, names, energy and attachment points.
 // Both are templated on the scalar: automatic_force_jacobians() differentiates
 // F exactly by forward-mode automatic differentiation, seeded by a colouring
 // of the Jacobian pattern (a chain of free bodies costs a few passes of F
@@ -24,6 +28,7 @@
 
 #include "stiffsim/model/articulated_data.h"
 #include "stiffsim/model/articulated_model.h"
+#include "stiffsim/model/bushing.h"
 #include "stiffsim/model/path.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
@@ -33,40 +38,8 @@
 namespace stiffsim {
 
 class BushingDerivatives;
+struct CompositeRigidBodyData;
 class RneaDerivatives;
-
-// A joint spring tau = -stiffness (q - rest) and viscous damping
-// tau = -damping q_dot on a 1-DOF joint (revolute, prismatic), beside the
-// URDF's own <dynamics damping>.
-struct JointForce {
-  double stiffness = 0.0;
-  double rest = 0.0;
-  double damping = 0.0;
-};
-
-// A stiff spring-damper that replaces a URDF joint in the compliant
-// formulation. It pulls the frame of body `child` onto the joint frame
-// (`placement` on body `parent`, -1 the world) in every direction the joint
-// forbids and leaves the joint's own motion free:
-//   linear:  E = k_lin/2 d^T P d, d the child origin relative to the joint
-//            origin, P = I (revolute), I - n n^T (prismatic), n n^T (planar);
-//   angular: E = k_ang (1 - n_joint . n_child) (revolute, planar: the axis
-//            may not tilt), E = k_ang/2 (3 - tr(R_child R_joint^T))
-//            (prismatic: no relative rotation);
-// damping c_lin P and c_ang on the relative velocities at the joint, so it
-// only dissipates. `joint` adds the joint spring and damping on the free
-// coordinate of a 1-DOF joint: the angle atan2 between the joint frame's and
-// the child's reference directions (in (-pi, pi]) or the offset n . d.
-struct Bushing {
-  std::string name;  // the URDF joint
-  int parent = -1;
-  int child = 0;
-  JointType type = JointType::kRevolute;
-  Eigen::Isometry3d placement = Eigen::Isometry3d::Identity();
-  Eigen::Vector3d axis = Eigen::Vector3d::UnitX();
-  double k_lin = 0.0, c_lin = 0.0, k_ang = 0.0, c_ang = 0.0;
-  JointForce joint;  // damping: the URDF's plus the scene's
-};
 
 // A PD drive on a 1-DOF joint of the exact formulation:
 //   tau = kp (p(t) - q) + kd (p'(t) - q_dot),
@@ -105,11 +78,6 @@ struct ArticulatedOptions {
   Eigen::VectorXd initial_q, initial_v;
   std::string formulation = "exact";  // for the name in reports: exact | compliant
 };
-
-// World poses of every body of `tree` at q (exact coordinates) and, when v is
-// given, every body's spatial velocity in its own coordinates.
-void forward_kinematics(const RigidTree& tree, const Eigen::VectorXd& q, const Eigen::VectorXd* v,
-                        std::vector<Pose<double>>* world, std::vector<Vec6<double>>* velocities);
 
 // The model (ArticulatedModel) is immutable; every evaluation writes into one
 // workspace (ArticulatedData) created with the system, so evaluations
@@ -231,11 +199,10 @@ class ArticulatedSystem : public System {
   mutable std::once_flag patterns_built_;
   mutable std::unique_ptr<Patterns> patterns_;
   // Workspaces: inverse dynamics, its acceleration argument, and the
-  // composite rigid body algorithm's subtree inertias and transforms.
+  // composite rigid body algorithm's.
   mutable std::unique_ptr<ArticulatedData<double>> data_;
   mutable Eigen::VectorXd acceleration_;
-  mutable std::vector<Eigen::Matrix<double, 6, 6>> composite_, transform_;
-  mutable std::vector<MotionSubspace<double>> subspace_;
+  mutable std::unique_ptr<CompositeRigidBodyData> crba_;
   // The automatic differentiation's own workspace (dual numbers), made on
   // its first use.
   struct DualWorkspace;

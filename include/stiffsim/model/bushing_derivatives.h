@@ -24,19 +24,11 @@
 
 #include "stiffsim/linalg/sparse_pattern.h"
 #include "stiffsim/model/articulated.h"
+#include "stiffsim/model/bushing.h"
 #include "stiffsim/model/rnea_derivatives.h"
 #include "stiffsim/system.h"
 
 namespace stiffsim {
-
-// A bushing's linear projector P = alpha I + beta n n^T and its angular
-// constraint: only the axis may not tilt (revolute, planar) or no relative
-// rotation at all (prismatic).
-struct BushingProjector {
-  double alpha = 1.0, beta = 0.0;
-  bool tilt_only = true;
-};
-BushingProjector bushing_projector(JointType type);
 
 class BushingDerivatives {
  public:

@@ -17,6 +17,15 @@
 
 namespace stiffsim {
 
+// A joint spring tau = -stiffness (q - rest) and viscous damping
+// tau = -damping q_dot on a 1-DOF joint (revolute, prismatic), beside the
+// URDF's own <dynamics damping>.
+struct JointForce {
+  double stiffness = 0.0;
+  double rest = 0.0;
+  double damping = 0.0;
+};
+
 template <typename T>
 using MotionSubspace = Eigen::Matrix<T, 6, Eigen::Dynamic, 0, 6, 6>;
 
