@@ -1,10 +1,19 @@
 #pragma once
 // The two kinds of failure a user sees, with the exit codes of the CLI.
 
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
 namespace stiffsim {
+
+// A number in a message as a stream prints it (six significant digits: the
+// value the user wrote in nearly every case, without a tail of round-off).
+inline std::string format_number(double x) {
+  std::ostringstream s;
+  s << x;
+  return s.str();
+}
 
 // Malformed or out-of-range input (scene, mesh, URDF, options). The message
 // names the file, the line or element and what was expected. Exit code 2.

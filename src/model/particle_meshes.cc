@@ -21,19 +21,14 @@ constexpr long kMaxNodes = 10'000'000;
 // vertices give exactly 0 in exact arithmetic and ~1e-16 in floating point.
 constexpr double kDegenerateAreaRatio = 1e-12;
 
-std::string str(double x) {
-  std::ostringstream s;
-  s << x;
-  return s.str();
-}
-
 [[noreturn]] void fail(const std::string& component, const std::string& what) {
   throw InputError(component + ": " + what);
 }
 
 void check_positive(const std::string& component, const char* parameter, double value) {
   if (!(std::isfinite(value) && value > 0.0)) {
-    fail(component, std::string(parameter) + " must be finite and > 0 (got " + str(value) + ")");
+    fail(component,
+         std::string(parameter) + " must be finite and > 0 (got " + format_number(value) + ")");
   }
 }
 
@@ -41,16 +36,18 @@ void check_springs(const std::string& component, const char* kind,
                    const std::optional<SpringParameters>& p) {
   if (!p) return;
   if (!(std::isfinite(p->k) && p->k >= 0.0)) {
-    fail(component, std::string(kind) + ".k must be finite and >= 0 (got " + str(p->k) + ")");
+    fail(component,
+         std::string(kind) + ".k must be finite and >= 0 (got " + format_number(p->k) + ")");
   }
   if (!(std::isfinite(p->c) && p->c >= 0.0)) {
-    fail(component, std::string(kind) + ".c must be finite and >= 0 (got " + str(p->c) + ")");
+    fail(component,
+         std::string(kind) + ".c must be finite and >= 0 (got " + format_number(p->c) + ")");
   }
 }
 
 void check_common(const std::string& component, double drag, const Eigen::Vector3d& gravity) {
   if (!(std::isfinite(drag) && drag >= 0.0)) {
-    fail(component, "drag must be finite and >= 0 (got " + str(drag) + ")");
+    fail(component, "drag must be finite and >= 0 (got " + format_number(drag) + ")");
   }
   if (!gravity.allFinite()) fail(component, "gravity must be finite");
 }

@@ -28,12 +28,6 @@ std::string node_range(int n) {
   throw InputError((component.empty() ? std::string("particles") : component) + ": " + what);
 }
 
-std::string str(double x) {
-  std::ostringstream s;
-  s << x;
-  return s.str();
-}
-
 // Derivative lanes of one element: positions then velocities of its
 // stencil's nodes. Fixed size, so the dual numbers live on the stack and the
 // automatic Jacobian costs O(elements), never O(elements * dofs).
@@ -102,8 +96,8 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
     }
     const double m = desc_.masses[i];
     if (!(std::isfinite(m) && m > 0.0)) {
-      fail(who,
-           "mass of node " + std::to_string(i) + " must be finite and > 0 (got " + str(m) + ")");
+      fail(who, "mass of node " + std::to_string(i) + " must be finite and > 0 (got " +
+                    format_number(m) + ")");
     }
   }
   springs_.elements.reserve(desc_.springs.size());
@@ -129,7 +123,7 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
   }
   if (!desc_.gravity.allFinite()) fail(who, "gravity is not finite");
   if (!(std::isfinite(desc_.drag) && desc_.drag >= 0.0)) {
-    fail(who, "drag must be finite and >= 0 (got " + str(desc_.drag) + ")");
+    fail(who, "drag must be finite and >= 0 (got " + format_number(desc_.drag) + ")");
   }
 
   // DOFs: free nodes in node order (duplicate pins are harmless).

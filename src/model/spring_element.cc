@@ -6,15 +6,6 @@
 #include "stiffsim/error.h"
 
 namespace stiffsim {
-namespace {
-
-std::string str(double x) {
-  std::ostringstream s;
-  s << x;
-  return s.str();
-}
-
-}  // namespace
 
 SpringElement::SpringElement(const Spring& spring, std::size_t index, int nodes,
                              const std::string& who)
@@ -31,16 +22,18 @@ SpringElement::SpringElement(const Spring& spring, std::size_t index, int nodes,
     throw InputError(tag + "connects node " + std::to_string(spring.a) + " to itself");
   }
   if (!(std::isfinite(spring.k) && spring.k >= 0.0)) {
-    throw InputError(tag + "stiffness k must be finite and >= 0 (got " + str(spring.k) + ")");
+    throw InputError(tag + "stiffness k must be finite and >= 0 (got " + format_number(spring.k) +
+                     ")");
   }
   if (!(std::isfinite(spring.c) && spring.c >= 0.0)) {
-    throw InputError(tag + "damping c must be finite and >= 0 (got " + str(spring.c) + ")");
+    throw InputError(tag + "damping c must be finite and >= 0 (got " + format_number(spring.c) +
+                     ")");
   }
   // Zero is legal (a zero-rest-length spring, even between coincident
   // nodes): its force k d is smooth everywhere.
   if (!(std::isfinite(spring.rest_length) && spring.rest_length >= 0.0)) {
-    throw InputError(tag + "rest length must be finite and >= 0 (got " + str(spring.rest_length) +
-                     ")");
+    throw InputError(tag + "rest length must be finite and >= 0 (got " +
+                     format_number(spring.rest_length) + ")");
   }
 }
 

@@ -40,13 +40,6 @@ std::string quoted(const std::string& kind, const std::string& name) {
   return kind + " '" + name + "'";
 }
 
-std::string number(double value) {
-  std::ostringstream out;
-  out.precision(6);
-  out << value;
-  return out.str();
-}
-
 // urdfdom's messages may span lines; ours must not.
 std::string one_line(const std::string& text) {
   std::string out;
@@ -363,8 +356,8 @@ Eigen::Vector3d principal_moments(const Eigen::Matrix3d& tensor) {
 }
 
 std::string eigenvalues_text(const Eigen::Vector3d& moments) {
-  return "eigenvalues " + number(moments(0)) + ", " + number(moments(1)) + ", " +
-         number(moments(2));
+  return "eigenvalues " + format_number(moments(0)) + ", " + format_number(moments(1)) + ", " +
+         format_number(moments(2));
 }
 
 // The link's mass properties in its own frame, checked for what every link
@@ -379,7 +372,8 @@ RigidInertia link_inertia(const urdf::Link& link, const std::string& source) {
   const urdf::Inertial& in = *link.inertial;
   const std::string element = quoted("link", link.name);
   if (!std::isfinite(in.mass) || in.mass < 0.0) {
-    fail(source, element + ": mass is " + number(in.mass) + "; expected a finite value >= 0");
+    fail(source,
+         element + ": mass is " + format_number(in.mass) + "; expected a finite value >= 0");
   }
   const double entries[6] = {in.ixx, in.iyy, in.izz, in.ixy, in.ixz, in.iyz};
   for (double v : entries) {
@@ -569,7 +563,8 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
     if (joint.dynamics) {
       damping = joint.dynamics->damping;
       if (!std::isfinite(damping) || damping < 0.0) {
-        fail(source, element + ": damping is " + number(damping) + "; expected a finite value >= 0");
+        fail(source,
+             element + ": damping is " + format_number(damping) + "; expected a finite value >= 0");
       }
     }
 

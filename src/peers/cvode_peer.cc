@@ -6,6 +6,8 @@
 
 #include <stdexcept>
 
+#include "stiffsim/error.h"
+
 #ifdef STIFFSIM_HAVE_CVODE
 
 #include <cvode/cvode.h>
@@ -73,12 +75,6 @@ void check_flag(int flag, const char* what) {
   if (flag < 0) {
     throw std::runtime_error(std::string("CVODE peer: ") + what + " returned " + flag_name(flag));
   }
-}
-
-std::string format_double(double x) {
-  std::ostringstream s;
-  s << x;
-  return s.str();
 }
 
 // Everything the callbacks need: the system, the work arrays (allocated once)
@@ -372,9 +368,9 @@ PeerRun run_cvode(const System& system, const State& initial, const std::vector<
     run.method = "cvode-bdf-dense";
     settings << "dense LU with CVODE's difference-quotient Jacobian (n " << n << ")";
   }
-  settings << ", rtol " << format_double(options.relative_tolerance) << ", atol "
-           << format_double(options.absolute_tolerance);
-  if (options.max_step > 0) settings << ", max step " << format_double(options.max_step);
+  settings << ", rtol " << format_number(options.relative_tolerance) << ", atol "
+           << format_number(options.absolute_tolerance);
+  if (options.max_step > 0) settings << ", max step " << format_number(options.max_step);
   if (caps.has_quaternions) {
     settings << ", quaternions normalized in the stored samples only (CVODE's state is not projected)";
   }

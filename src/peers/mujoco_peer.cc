@@ -43,6 +43,7 @@
 #include <mujoco/mujoco.h>
 #endif
 
+#include "stiffsim/error.h"
 #include "stiffsim/model/articulated.h"
 
 namespace stiffsim {
@@ -266,12 +267,6 @@ mjModel* load_model(const std::string& xml, std::string* error) {
   }
   if (!model) *error = text;
   return model;
-}
-
-std::string format_number(double x) {
-  std::ostringstream s;
-  s << x;
-  return s.str();
 }
 
 // The first warning MuJoCo raised that makes the run meaningless, or "".
