@@ -48,6 +48,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
   for (const auto& c : components_) {
     offsets_.push_back(dims_);
     const Dimensions d = c->dimensions();
+    component_states_.emplace_back(0.0, Eigen::VectorXd(d.nx()));
     dims_.nq += d.nq;
     dims_.nv += d.nv;
     dims_.nz += d.nz;
@@ -500,17 +501,26 @@ std::vector<int> Scene::jacobian_colouring_hint() const {
 double Scene::energy(const State& s) const {
   if (!caps_.has_energy) return std::nan("");
   double e = 0.0;
-  for (size_t i = 0; i < components_.size(); ++i) {
-    const Dimensions d = components_[i]->dimensions();
-    const Dimensions& o = offsets_[i];
-    State c(s.t, Eigen::VectorXd(d.nx()));
-    c.x.segment(0, d.nq) = s.x.segment(o.nq, d.nq);
-    c.x.segment(d.nq, d.nv) = s.x.segment(dims_.nq + o.nv, d.nv);
-    c.x.segment(d.nq + d.nv, d.nz) = s.x.segment(dims_.nq + dims_.nv + o.nz, d.nz);
-    e += components_[i]->energy(c);
+  if (components_.size() == 1) {
+    // One component's state is the scene's: no copy.
+    e = components_[0]->energy(s);
+  } else {
+    // Energy is evaluated once or twice per step (the energy guard, the
+    // incremental potential): the components' states are scratch, never
+    // allocated here.
+    for (size_t i = 0; i < components_.size(); ++i) {
+      const Dimensions d = components_[i]->dimensions();
+      const Dimensions& o = offsets_[i];
+      State& c = component_states_[i];
+      c.t = s.t;
+      c.x.segment(0, d.nq) = s.x.segment(o.nq, d.nq);
+      c.x.segment(d.nq, d.nv) = s.x.segment(dims_.nq + o.nv, d.nv);
+      c.x.segment(d.nq + d.nv, d.nz) = s.x.segment(dims_.nq + dims_.nv + o.nz, d.nz);
+      e += components_[i]->energy(c);
+    }
   }
   if (!attachments_.empty()) {
-    const Eigen::VectorXd q = s.x.head(dims_.nq), v = s.x.segment(dims_.nq, dims_.nv);
+    const ConstVectorRef q = s.x.head(dims_.nq), v = s.x.segment(dims_.nq, dims_.nv);
     for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
       attachment_points(k, s.t, q, v);
       e += 0.5 * attachments_[k].k * (point_b_.p - point_a_.p).squaredNorm();

@@ -100,6 +100,8 @@ class Scene : public System {
   mutable PointKinematics point_a_, point_b_;
   mutable std::vector<Eigen::Vector3d> dp_dot_dq_;
   std::vector<Dimensions> offsets_;
+  // Per component, a state to hand energy() (scratch, sized at construction).
+  mutable std::vector<State> component_states_;
   Dimensions dims_;
   Capabilities caps_;
   SparseMatrix velocity_map_pattern_;

@@ -305,6 +305,10 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   linearization_.resize(nx);
   predictor_qdot_.resize(dims_.nq);
   energy_state_.x = Eigen::VectorXd::Zero(nx);
+  // NaN matches no state: nothing remembered yet, and no allocation later.
+  for (RememberedEnergy& r : remembered_energy_) {
+    r.x = Eigen::VectorXd::Constant(nx, std::numeric_limits<double>::quiet_NaN());
+  }
   newton_tolerance_ = implicit_.newton_kappa * settings_.accuracy;
   extrapolated_h_ = extrapolated_correction_ = extrapolated_motion_ = 0.0;
   // Only where the step's energy change obeys the identity of
@@ -590,13 +594,25 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
 
 double ImplicitIntegrator::energy_gain(const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                                        double* allowance) {
-  energy_state_.x = x0;
-  const double before = system_.energy(energy_state_);
-  energy_state_.x = x;
-  const double after = system_.energy(energy_state_);
+  const double before = guard_energy(x0);
+  const double after = guard_energy(x);
   // Round-off of the energy sums and the Newton tolerance's share.
   *allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
   return after - before;
+}
+
+double ImplicitIntegrator::guard_energy(const Eigen::VectorXd& x) {
+  // Comparing states costs a fraction of an energy evaluation (which visits
+  // every element); about half the guard's evaluations are repeats.
+  for (const RememberedEnergy& r : remembered_energy_) {
+    if (r.x.size() == x.size() && r.x == x) return r.value;
+  }
+  energy_state_.x = x;
+  RememberedEnergy& slot = remembered_energy_[next_remembered_];
+  next_remembered_ = 1 - next_remembered_;
+  slot.value = system_.energy(energy_state_);
+  slot.x = x;
+  return slot.value;
 }
 
 double ImplicitIntegrator::negative_curvature(double t, const Eigen::VectorXd& q,

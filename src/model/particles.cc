@@ -448,9 +448,13 @@ std::vector<int> ParticleSystem::jacobian_colouring_hint() const {
 
 double ParticleSystem::energy(const State& s) const {
   const Dimensions dims = dimensions();
-  const auto q = s.q(dims);
+  const ConstVectorRef q = s.q(dims);
   const auto v = s.v(dims);
-  auto position = [&](int i) -> Eigen::Vector3d { return node_position(i, q, s.t); };
+  // Free nodes read the state in place, as in gather().
+  auto position = [&](int i) -> Eigen::Vector3d {
+    const int d = dof_of_node_[i];
+    return d >= 0 ? Eigen::Vector3d(q.segment<3>(d)) : node_position(i, q, s.t);
+  };
   // Pinned nodes are included with their positions at s.t (for a fixed pin
   // a constant offset that makes this the total energy of every particle, as
   // a physicist would write it; differences in time are unaffected). A

@@ -78,9 +78,4 @@ void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vecto
   }
 }
 
-double SpringElement::energy(const Eigen::Vector3d* x) const {
-  const double stretch = (x[1] - x[0]).norm() - spring_.rest_length;
-  return 0.5 * spring_.k * stretch * stretch;
-}
-
 }  // namespace stiffsim

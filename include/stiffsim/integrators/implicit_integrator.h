@@ -4,6 +4,7 @@
 // linear solver behind the iteration matrix. Subclasses hold only their
 // method.
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -287,6 +288,10 @@ class ImplicitIntegrator : public IntegratorBase {
                            const Eigen::VectorXd& x);
   // E(x) - E(x0), and its round-off allowance in *allowance.
   double energy_gain(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double* allowance);
+  // E(x) for the guard (a passive scene: no dependence on t), remembered for
+  // the last two states: a step's end is the next solve's start, and the
+  // solves of step doubling share their starts.
+  double guard_energy(const Eigen::VectorXd& x);
   // dq^T K(q) dq with K = dF/dq of the conservative forces alone (the
   // exact Jacobian at v = 0): minus the potential's curvature along dq.
   double negative_curvature(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& dq);
@@ -388,6 +393,12 @@ class ImplicitIntegrator : public IntegratorBase {
   Eigen::VectorXd guard_q_, guard_v_, guard_z_;
   bool energy_guard_suspended_ = false;
   State energy_state_;
+  struct RememberedEnergy {
+    Eigen::VectorXd x;
+    double value = 0.0;
+  };
+  std::array<RememberedEnergy, 2> remembered_energy_;
+  int next_remembered_ = 0;
   Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_;
 };
 

@@ -84,7 +84,12 @@ class SpringElement {
                        const JacobianRequest& request, Eigen::Matrix3d* K, Eigen::Matrix3d* D,
                        long* approximated) const;
 
-  double energy(const Eigen::Vector3d* x) const;
+  // Inline: the energy guard and the incremental potential evaluate every
+  // spring once per step or search trial, as often as the forces.
+  double energy(const Eigen::Vector3d* x) const {
+    const double stretch = (x[1] - x[0]).norm() - spring_.rest_length;
+    return 0.5 * spring_.k * stretch * stretch;
+  }
 
  private:
   Spring spring_;
