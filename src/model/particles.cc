@@ -46,13 +46,14 @@ Vector3<ElementDual<Nodes>> seeded(const Eigen::Vector3d& value, int first_lane)
 template <typename E>
 inline bool ParticleSystem::gather(const E& e, double t, const ConstVectorRef& q,
                                    const ConstVectorRef& v, Eigen::Vector3d* x,
-                                   Eigen::Vector3d* vel) const {
+                                   Eigen::Vector3d* vel, int* dofs) const {
   const auto stencil = e.nodes();
   bool moves = false;
   for (int i = 0; i < E::kNodes; ++i) {
     // Free nodes read the state in place; the hot loops must not pay a call
     // per node for them.
     const int d = dof_of_node_[stencil[i]];
+    if (dofs) dofs[i] = d;
     if (d >= 0) {
       x[i] = q.segment<3>(d);
       vel[i] = v.segment<3>(d);
@@ -310,13 +311,12 @@ void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVector
   for_each_element_set([&](const auto& set) {
     constexpr int n = std::decay_t<decltype(set)>::kNodes;
     Eigen::Vector3d x[n], vel[n], f[n];
+    int dofs[n];
     for (const auto& e : set.elements) {
-      if (!gather(e, t, q, v, x, vel)) continue;  // every node pinned: no force on a DOF
+      if (!gather(e, t, q, v, x, vel, dofs)) continue;  // every node pinned: no force on a DOF
       e.force(x, vel, f);
-      const auto stencil = e.nodes();
       for (int i = 0; i < n; ++i) {
-        const int di = dof_of_node_[stencil[i]];
-        if (di >= 0) F.segment<3>(di) += f[i];
+        if (dofs[i] >= 0) F.segment<3>(dofs[i]) += f[i];
       }
     }
   });

@@ -113,8 +113,9 @@ class ParticleSystem : public System {
   // Positions and velocities of element e's stencil at t; false when every
   // node of it is pinned (it then acts on no degree of freedom).
   template <typename E>
+  // dofs[i] (when given) receives node i's first DOF, or -1 where pinned.
   bool gather(const E& e, double t, const ConstVectorRef& q, const ConstVectorRef& v,
-              Eigen::Vector3d* x, Eigen::Vector3d* vel) const;
+              Eigen::Vector3d* x, Eigen::Vector3d* vel, int* dofs = nullptr) const;
 
   std::vector<int> dof_of_node_;  // 3*free index or -1
   std::vector<int> motion_of_node_;  // index into desc_.pin_motions or -1
