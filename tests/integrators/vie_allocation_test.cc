@@ -12,6 +12,7 @@
 #include "stiffsim/model/compliant.h"
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/model/particles.h"
+#include "stiffsim/scene.h"
 
 // Not under AddressSanitizer, whose own malloc a replacement would shadow.
 #if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
@@ -143,6 +144,33 @@ TEST(VieAllocation, CompliantChainAllocatesNothing) {
   IntegratorStatistics st;
   EXPECT_EQ(allocations_stepping(*chain, fresh, 1e-3, 0.01, 0.03, &st), 0);
   EXPECT_GT(st.jacobian_evaluations, 20);
+}
+
+// What the CLI steps: a Scene. Two ropes under gravity, the second hanging
+// from the first's free end by an attachment: the scene splits forces,
+// Jacobians and the energy guard's energies over its components and adds
+// the coupling blocks, all into workspaces sized once.
+TEST(VieAllocation, SceneOfTiedRopesAllocatesNothing) {
+  auto rope = [](const char* name, const Eigen::Vector3d& origin, bool pinned) {
+    RopeSpec spec;
+    spec.name = name;
+    spec.nodes = 12;
+    spec.total_mass = 0.05;
+    spec.stretch = SpringParameters{1e3, 0.1};
+    spec.bend = SpringParameters{1.0, 0.01};
+    spec.origin = origin;
+    if (!pinned) spec.pinned = std::vector<int>{};
+    return std::make_unique<ParticleSystem>(make_rope(spec));
+  };
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(rope("upper", Eigen::Vector3d::Zero(), true));
+  parts.push_back(rope("lower", Eigen::Vector3d(1.0, 0.0, 0.0), false));
+  std::vector<Attachment> tie = {
+      {"tie", {0, 11, Eigen::Vector3d::Zero()}, {1, 0, Eigen::Vector3d::Zero()}, 1e3, 0.1}};
+  const Scene scene("tied ropes", std::move(parts), std::move(tie));
+  IntegratorStatistics st;
+  EXPECT_EQ(allocations_stepping(scene, ImplicitSettings{}, 1e-3, 0.02, 0.05, &st), 0);
+  EXPECT_GT(st.newton_raphson_iterations, 30);
 }
 
 TEST(VieAllocation, CounterSeesAllocations) {
