@@ -213,8 +213,7 @@ void BushingDerivatives::add_bushing(const Bushing& bu, const BlockSlots& slots,
 
   // The revolute joint's spring on theta = atan2(y, x) and its damper.
   if (bu.type == JointType::kRevolute && (jf.stiffness != 0.0 || jf.damping != 0.0)) {
-    Eigen::Vector3d e1, e2;
-    planar_basis(bu.axis, &e1, &e2);
+    const Vec3d e1 = reference_direction(bu.axis);  // as the forces' angle (bushing.h)
     const Vec3d ea = RJ * e1, eb = b.R * e1, fa = n.cross(ea);
     const double x = ea.dot(eb), y = fa.dot(eb), rho = x * x + y * y;
     const double theta = std::atan2(y, x);

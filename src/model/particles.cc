@@ -269,18 +269,6 @@ Eigen::Vector3d ParticleSystem::pinned_velocity(int node, double t) const {
   return v;
 }
 
-Eigen::Vector3d ParticleSystem::node_position(int i, const ConstVectorRef& q, double t) const {
-  const int di = dof_of_node_[i];
-  if (di >= 0) return q.segment<3>(di);
-  return motion_of_node_[i] < 0 ? desc_.positions[i] : pinned_position(i, t);
-}
-
-Eigen::Vector3d ParticleSystem::node_velocity(int i, const ConstVectorRef& v, double t) const {
-  const int di = dof_of_node_[i];
-  if (di >= 0) return v.segment<3>(di);
-  return motion_of_node_[i] < 0 ? Eigen::Vector3d::Zero() : pinned_velocity(i, t);
-}
-
 void ParticleSystem::point_kinematics(double t, int node, const Eigen::Vector3d& local,
                                       const ConstVectorRef& q, const ConstVectorRef& v,
                                       PointKinematics* out) const {
@@ -450,11 +438,7 @@ double ParticleSystem::energy(const State& s) const {
   const Dimensions dims = dimensions();
   const ConstVectorRef q = s.q(dims);
   const auto v = s.v(dims);
-  // Free nodes read the state in place, as in gather().
-  auto position = [&](int i) -> Eigen::Vector3d {
-    const int d = dof_of_node_[i];
-    return d >= 0 ? Eigen::Vector3d(q.segment<3>(d)) : node_position(i, q, s.t);
-  };
+  auto position = [&](int i) -> Eigen::Vector3d { return node_position(i, q, s.t); };
   // Pinned nodes are included with their positions at s.t (for a fixed pin
   // a constant offset that makes this the total energy of every particle, as
   // a physicist would write it; differences in time are unaffected). A

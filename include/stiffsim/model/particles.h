@@ -106,14 +106,23 @@ class ParticleSystem : public System {
 
   ParticleDescription desc_;
   // Position and velocity of node i at time t: from q and v for a free node,
-  // from its rest position and motion for a pinned one.
-  Eigen::Vector3d node_position(int i, const ConstVectorRef& q, double t) const;
-  Eigen::Vector3d node_velocity(int i, const ConstVectorRef& v, double t) const;
+  // from its rest position and motion for a pinned one. Inline: the energy
+  // and element loops call them per node, and a free node must cost a read.
+  Eigen::Vector3d node_position(int i, const ConstVectorRef& q, double t) const {
+    const int di = dof_of_node_[i];
+    if (di >= 0) return q.segment<3>(di);
+    return motion_of_node_[i] < 0 ? desc_.positions[i] : pinned_position(i, t);
+  }
+  Eigen::Vector3d node_velocity(int i, const ConstVectorRef& v, double t) const {
+    const int di = dof_of_node_[i];
+    if (di >= 0) return v.segment<3>(di);
+    return motion_of_node_[i] < 0 ? Eigen::Vector3d::Zero() : pinned_velocity(i, t);
+  }
 
   // Positions and velocities of element e's stencil at t; false when every
-  // node of it is pinned (it then acts on no degree of freedom).
+  // node of it is pinned (it then acts on no degree of freedom). dofs[i]
+  // (when given) receives node i's first DOF, or -1 where pinned.
   template <typename E>
-  // dofs[i] (when given) receives node i's first DOF, or -1 where pinned.
   bool gather(const E& e, double t, const ConstVectorRef& q, const ConstVectorRef& v,
               Eigen::Vector3d* x, Eigen::Vector3d* vel, int* dofs = nullptr) const;
 
