@@ -98,8 +98,8 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
       const System& s = *components_[p->component];
       if (s.point_elements() == 0) {
         throw InputError(who + ": component '" + s.name() +
-                         "' offers no points to attach to (a tree with floating or planar "
-                         "joints, or in the compliant formulation)");
+                         "' offers no points to attach to (a tree with a floating joint, "
+                         "or in the compliant formulation)");
       }
       if (p->element < 0 || p->element >= s.point_elements()) {
         throw InputError(who + ": component '" + s.name() + "' has no point " +

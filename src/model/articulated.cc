@@ -578,51 +578,87 @@ double ArticulatedSystem::energy(const State& s) const {
 int ArticulatedSystem::point_elements() const {
   if (!options_.bushings.empty()) return 0;
   for (const TreeBody& b : model_.tree.bodies) {
-    if (b.type != JointType::kRevolute && b.type != JointType::kPrismatic) return 0;
+    if (b.type == JointType::kFloating) return 0;
   }
   return model_.bodies();
 }
 
 int ArticulatedSystem::point_dofs(int body) const {
-  int depth = 0;
-  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) ++depth;
-  return depth;
+  int dofs = 0;
+  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) {
+    dofs += joint_nv(model_.tree.bodies[i].type);
+  }
+  return dofs;
 }
 
 void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector3d& local,
                                          const ConstVectorRef& q, const ConstVectorRef& v,
                                          PointKinematics* out) const {
-  // The bodies from the root down to `body` (every one a 1-DOF joint, so
-  // a body's index is also its joint's), first collected upwards.
-  std::vector<int>& path = out->dofs;
-  path.clear();
-  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) path.push_back(i);
-  std::reverse(path.begin(), path.end());
-  const int n = static_cast<int>(path.size());
-  out->J.resize(n);
-  out->axis.resize(n);
+  // The bodies from the root down to `body`, first collected upwards. Each
+  // joint is one or more elementary dofs, each a translation along a world
+  // direction or a turn about a world axis through a world point: a
+  // revolute or prismatic joint one, a planar joint three (in-plane
+  // translations e1 and e2, then the turn about its normal through the
+  // translated origin). q_dot = v for all of them.
+  std::vector<int>& dofs = out->dofs;
+  dofs.clear();
+  out->J.clear();
+  out->axis.clear();
+  for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) dofs.push_back(i);
+  std::reverse(dofs.begin(), dofs.end());
+  const int bodies = static_cast<int>(dofs.size());
   // World poses down the path. A URDF child frame is its joint's frame, so
-  // body i's world origin and axis are its joint's.
+  // body i's world origin and axis are its joint's. J holds each turn's
+  // origin until p is known; axis is zero for a translation.
   Pose<double> world;
-  for (int k = 0; k < n; ++k) {
-    const int i = path[k];
+  for (int k = 0; k < bodies; ++k) {
+    const int i = dofs[k];
     const TreeBody& b = model_.tree.bodies[i];
-    world = compose(world, body_joint_motion<double>(model_, i, q.segment(model_.q_offset[i], 1)).pose);
-    out->axis[k] = world.R * b.axis;
-    out->J[k] = world.p;  // the joint origin for now
+    const auto qi = q.segment(model_.q_offset[i], joint_nq(b.type));
+    const Pose<double> next = compose(world, body_joint_motion<double>(model_, i, qi).pose);
+    switch (b.type) {
+      case JointType::kRevolute:
+        out->axis.push_back(next.R * b.axis);
+        out->J.push_back(next.p);
+        break;
+      case JointType::kPrismatic:
+        out->axis.push_back(Eigen::Vector3d::Zero());
+        out->J.push_back(next.R * b.axis);
+        break;
+      case JointType::kPlanar: {
+        Eigen::Vector3d e1, e2;
+        planar_basis(b.axis, &e1, &e2);
+        const Eigen::Matrix3d frame = world.R * b.placement.linear();
+        out->axis.push_back(Eigen::Vector3d::Zero());
+        out->J.push_back(frame * e1);
+        out->axis.push_back(Eigen::Vector3d::Zero());
+        out->J.push_back(frame * e2);
+        out->axis.push_back(frame * b.axis);
+        out->J.push_back(next.p);
+        break;
+      }
+      case JointType::kFloating:
+        throw std::logic_error(name() + ": point kinematics below a floating joint");
+    }
+    world = next;
   }
   out->p = world.R * local + world.p;  // in the base frame until the end
   out->p_dot = root_velocity(t);
-  for (int k = 0; k < n; ++k) {
-    const int i = path[k];
-    if (model_.tree.bodies[i].type == JointType::kRevolute) {
-      out->J[k] = out->axis[k].cross(out->p - out->J[k]);
-    } else {
-      out->J[k] = out->axis[k];
-      out->axis[k].setZero();  // a translation turns nothing
+  // dofs held the bodies; it now receives their velocity indices, filled
+  // from the back so no body is overwritten before it is read (a body's
+  // first column is at or after its own position in the list).
+  int column = static_cast<int>(out->J.size());
+  dofs.resize(column);
+  for (int k = bodies - 1; k >= 0; --k) {
+    const int i = dofs[k];
+    for (int j = joint_nv(model_.tree.bodies[i].type) - 1; j >= 0; --j) {
+      --column;
+      dofs[column] = model_.v_offset[i] + j;
+      if (!out->axis[column].isZero()) {
+        out->J[column] = out->axis[column].cross(out->p - out->J[column]);
+      }
+      out->p_dot += out->J[column] * v[dofs[column]];
     }
-    path[k] = model_.v_offset[i];
-    out->p_dot += out->J[k] * v[path[k]];
   }
   out->p += root_displacement(t);
 }

@@ -231,6 +231,111 @@ TEST(Attachment, FreeRopesKeepTheirLinearMomentum) {
   EXPECT_LT(gap.norm(), 0.7);
 }
 
+// A sled on a tilted plane (a planar root whose frame is turned and moved),
+// an arm turning on it, a slider on the arm; a rope hangs from the slider
+// and a brace ties the sled to the world. The planar root's three dofs
+// (two in-plane translations, then the turn about the normal through the
+// moved origin) enter the coupled Jacobians like any other joint's.
+std::unique_ptr<Scene> rope_on_a_sled(double c) {
+  RigidTree tree;
+  tree.name = "sled";
+  tree.file = "sled (built in code)";
+  auto add = [&](const char* link, int parent, JointType type, Vector3d axis, Vector3d at) {
+    TreeBody b;
+    b.link = link;
+    b.joint = std::string(link) + "_joint";
+    b.parent = parent;
+    b.type = type;
+    b.axis = axis.normalized();
+    b.placement.translation() = at;
+    b.inertia.mass = 0.2;
+    b.inertia.com = Vector3d(0.01, -0.02, -0.05);
+    b.inertia.inertia = Vector3d(2e-4, 3e-4, 1e-4).asDiagonal();
+    tree.bodies.push_back(b);
+  };
+  add("sled", -1, JointType::kPlanar, Vector3d(0.1, 0.3, 1.0), Vector3d(0.05, -0.02, 0.1));
+  tree.bodies[0].placement.linear() =
+      Eigen::AngleAxisd(0.4, Vector3d(1.0, -0.5, 0.2).normalized()).toRotationMatrix();
+  add("arm", 0, JointType::kRevolute, Vector3d(0.2, 1.0, 0.0), Vector3d(0.0, 0.05, -0.1));
+  add("slider", 1, JointType::kPrismatic, Vector3d(0.0, 0.3, -1.0), Vector3d(0.02, 0.0, -0.1));
+  ArticulatedOptions o;
+  o.initial_q = (VectorXd(5) << 0.1, -0.05, 0.7, 0.3, 0.02).finished();
+  o.initial_v = VectorXd::Zero(5);
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(std::make_unique<ArticulatedSystem>(tree, o));
+  parts.push_back(free_rope("rope", 5, c, Vector3d(0, 0, -9.81), Vector3d(0.1, 0.0, -0.2)));
+  std::vector<Attachment> at = {
+      {"grip", {0, 2, Vector3d(0.03, -0.01, -0.02)}, {1, 0, Vector3d::Zero()}, 1e3, 2.0 * c},
+      {"brace", {0, 0, Vector3d(0.04, 0.02, 0.0)}, {-1, 0, Vector3d(0.3, -0.1, 0.2)}, 40.0, c},
+      {"tie", {0, 0, Vector3d(-0.02, 0.05, 0.01)}, {0, 2, Vector3d(0.01, 0.0, 0.0)}, 25.0, c}};
+  return std::make_unique<Scene>("sled", std::move(parts), std::move(at));
+}
+
+TEST(Attachment, JacobiansMatchDifferencesOnAPlanarRoot) {
+  const auto s = rope_on_a_sled(0.5);
+  ASSERT_EQ(s->component(0).point_elements(), 3);
+  EXPECT_EQ(s->component(0).point_dofs(2), 5);
+  const Dimensions d = s->dimensions();
+  const State x = moving_state(*s);
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
+  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
+  for (int j = 0; j < d.nq; ++j) {
+    VectorXd qp = q, qm = q, vp = v, vm = v;
+    qp[j] += 1e-6;
+    qm[j] -= 1e-6;
+    vp[j] += 1e-3;
+    vm[j] -= 1e-3;
+    Kd.col(j) = (scene_forces(*s, 0.1, qp, v) - scene_forces(*s, 0.1, qm, v)) / 2e-6;
+    Dd.col(j) = (scene_forces(*s, 0.1, q, vp) - scene_forces(*s, 0.1, q, vm)) / 2e-3;
+  }
+  ForceJacobians J = s->jacobian_pattern();
+  JacobianRequest complete;
+  complete.complete = true;
+  s->force_jacobians(0.1, q, v, VectorXd(), complete, &J);
+  // The sled's rows against the rope's columns: the coupling is there.
+  EXPECT_GT(Kd.block(0, 5, 5, 15).norm(), 1.0);
+  EXPECT_LT((MatrixXd(J.dF_dq) - Kd).norm(), 1e-6 * Kd.norm()) << MatrixXd(J.dF_dq) - Kd;
+  EXPECT_LT((MatrixXd(J.dF_dv) - Dd).norm(), 1e-8 * Dd.norm()) << MatrixXd(J.dF_dv) - Dd;
+}
+
+TEST(Attachment, PointVelocityOnAPlanarRootMatchesDifferences) {
+  // p_dot from the point kinematics against the motion of p itself.
+  const auto s = rope_on_a_sled(0.5);
+  const System& sled = s->component(0);
+  const State x = moving_state(*s);
+  const Dimensions d = sled.dimensions();
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(s->dimensions().nq, d.nv);
+  PointKinematics k, kp, km;
+  const Vector3d local(0.03, -0.01, -0.02);
+  sled.point_kinematics(0.0, 2, local, q, v, &k);
+  const double dt = 1e-6;
+  sled.point_kinematics(0.0, 2, local, q + dt * v, v, &kp);
+  sled.point_kinematics(0.0, 2, local, q - dt * v, v, &km);
+  EXPECT_LT((k.p_dot - (kp.p - km.p) / (2 * dt)).norm(), 1e-8 * k.p_dot.norm());
+  ASSERT_EQ(k.dofs.size(), 5u);
+  for (int j = 0; j < 5; ++j) EXPECT_EQ(k.dofs[j], j);
+}
+
+TEST(Attachment, EnergyIsConservedOnAPlanarRootWithoutDampers) {
+  // No dampers, no joint damping: RK45 at a tight tolerance keeps the sum
+  // of the scene's energies (the attachments' springs included).
+  const auto s = rope_on_a_sled(0.0);
+  IntegratorSettings tight;
+  tight.accuracy = 1e-10;
+  RungeKutta45 rk(*s, tight);
+  rk.initialize(s->initial_state());
+  const double e0 = s->energy(s->initial_state());
+  double worst = 0.0;
+  for (double t = 0.05; t <= 0.3 + 1e-9; t += 0.05) {
+    rk.integrate_to(t);
+    worst = std::max(worst, std::abs(s->energy(rk.state()) - e0));
+  }
+  // The same bound as the chain's above: the rope and the sled fall about
+  // 0.1 m, energies of order 0.1 J.
+  EXPECT_LT(worst, 1e-7) << "e0 = " << e0;
+  EXPECT_GT((rk.state().x - s->initial_state().x).norm(), 1e-2);
+}
+
 TEST(Attachment, BadPointsAreRejected) {
   auto scene_with = [](Attachment a) {
     std::vector<std::unique_ptr<System>> parts;
