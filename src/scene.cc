@@ -98,8 +98,8 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
       const System& s = *components_[p->component];
       if (s.point_elements() == 0) {
         throw InputError(who + ": component '" + s.name() +
-                         "' offers no points to attach to (a tree with a floating joint, "
-                         "or in the compliant formulation)");
+                         "' offers no points to attach to (a tree in the compliant "
+                         "formulation)");
       }
       if (p->element < 0 || p->element >= s.point_elements()) {
         throw InputError(who + ": component '" + s.name() + "' has no point " +
@@ -111,11 +111,15 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
   }
   for (PointKinematics* p : {&point_a_, &point_b_}) {
     p->dofs.reserve(most_dofs);
+    p->q_index.reserve(most_dofs);
     p->J.reserve(most_dofs);
     p->axis.reserve(most_dofs);
+    // Four quaternion coordinates per floating joint, which has six dofs.
+    p->quaternion.reserve(most_dofs);
   }
-  // Both points' dofs at once (add_attachment_jacobians).
-  dp_dot_dq_.reserve(2 * most_dofs);
+  // Both points' dofs and quaternion coordinates at once
+  // (add_attachment_jacobians).
+  dp_dot_dq_.reserve(4 * most_dofs);
 }
 
 void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
@@ -126,8 +130,10 @@ void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
       out->p = p->local;
       out->p_dot.setZero();
       out->dofs.clear();
+      out->q_index.clear();
       out->J.clear();
       out->axis.clear();
+      out->quaternion.clear();
       continue;
     }
     const System& s = *components_[p->component];
@@ -167,47 +173,84 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
     const Eigen::Vector3d f = attachment_force(at);
     const int na = static_cast<int>(point_a_.dofs.size());
     const int n = na + static_cast<int>(point_b_.dofs.size());
-    // Entry (i, m) over the dofs of a then b; s = +1 on a's, -1 on b's:
-    //   F_i = s_i J_i . f,  df/dq_m = -s_m (k J_m + c dp_dot/dq_m),
-    //   df/dv_m = -s_m c J_m, and on one point's own dofs the turn of its
-    //   columns, s_i f . dJ_i/dq_m (point_kinematics.h).
+    // Rows are the velocity dofs of a then b, s = +1 on a's, -1 on b's:
+    //   F_i = s_i J_i . f,  df/dq_m = -s_m (k dp/dq_m + c dp_dot/dq_m),
+    //   df/dv_m = -s_m c J_m, and on one point's own columns the turn of
+    //   its rows, s_i f . dJ_i/dq_m (point_kinematics.h). Columns of dF/dq
+    //   are the coordinates of a then b: those of dofs with q_dot = v in
+    //   dof order, then the quaternions'.
     auto point = [&](int i) -> const PointKinematics& { return i < na ? point_a_ : point_b_; };
     auto local = [&](int i) { return i < na ? i : i - na; };
     auto sign = [&](int i) { return i < na ? 1.0 : -1.0; };
-    // dp_dot/dq_m = axis_m x (sum_{j >= m} v_j J_j) + (sum_{j < m} v_j axis_j) x J_m.
-    dp_dot_dq_.resize(n);
+    // dp_dot/dq_m = axis_m x (sum_{j >= m} v_j J_j) + (sum_{j < m} v_j axis_j) x J_m
+    // per dof m, then per quaternion coordinate
+    // G (sum_{j >= first} v_j J_j) + (sum_{j < first} v_j axis_j) x dp.
+    const int qa = static_cast<int>(point_a_.quaternion.size());
+    dp_dot_dq_.resize(n + qa + point_b_.quaternion.size());
     for (const PointKinematics* pk : {&point_a_, &point_b_}) {
-      const int first = pk == &point_a_ ? 0 : na;
+      const bool is_a = pk == &point_a_;
+      const int first = is_a ? 0 : na;
       const int count = static_cast<int>(pk->dofs.size());
-      const int component = pk == &point_a_ ? at.a.component : at.b.component;
+      const int component = is_a ? at.a.component : at.b.component;
       const int ov = component < 0 ? 0 : offsets_[component].nv;
       Eigen::Vector3d below = Eigen::Vector3d::Zero(), above = Eigen::Vector3d::Zero();
       for (int j = 0; j < count; ++j) below += v[ov + pk->dofs[j]] * pk->J[j];
+      const Eigen::Vector3d all = below;
       for (int m = 0; m < count; ++m) {
         dp_dot_dq_[first + m] = pk->axis[m].cross(below) + above.cross(pk->J[m]);
         below -= v[ov + pk->dofs[m]] * pk->J[m];
         above += v[ov + pk->dofs[m]] * pk->axis[m];
       }
+      for (size_t r = 0; r < pk->quaternion.size(); ++r) {
+        const QuaternionCoordinate& qc = pk->quaternion[r];
+        Eigen::Vector3d turning = all, upstream = Eigen::Vector3d::Zero();
+        for (int j = 0; j < qc.first; ++j) {
+          turning -= v[ov + pk->dofs[j]] * pk->J[j];
+          upstream += v[ov + pk->dofs[j]] * pk->axis[j];
+        }
+        dp_dot_dq_[n + (is_a ? 0 : qa) + r] = qc.G * turning + upstream.cross(qc.dp);
+      }
     }
     const std::vector<int>& sq = L.attachment_q[k];
     const std::vector<int>& sv = L.attachment_v[k];
+    const int columns = static_cast<int>(sq.size()) / std::max(n, 1);
     for (int i = 0; i < n; ++i) {
       const PointKinematics& pi = point(i);
       const Eigen::Vector3d& Ji = pi.J[local(i)];
+      const int li = local(i);
+      int column = 0;
+      // Columns of coordinates with q_dot = v.
       for (int m = 0; m < n; ++m) {
         const PointKinematics& pm = point(m);
         const Eigen::Vector3d& Jm = pm.J[local(m)];
         const double s = sign(i) * sign(m);
+        D[sv[i * n + m]] += -at.c * s * Ji.dot(Jm);
+        if (pm.q_index[local(m)] < 0) continue;
         double kq = -at.k * s * Ji.dot(Jm);
         if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq_[m]);
         if (&pi == &pm) {
-          const int li = local(i), lm = local(m);
+          const int lm = local(m);
           const Eigen::Vector3d turn =
               lm <= li ? pm.axis[lm].cross(Ji) : pi.axis[li].cross(Jm);
           kq += sign(i) * f.dot(turn);
         }
-        K[sq[i * n + m]] += kq;
-        D[sv[i * n + m]] += -at.c * s * Ji.dot(Jm);
+        K[sq[i * columns + column++]] += kq;
+      }
+      // Quaternion coordinates.
+      for (const PointKinematics* pm : {&point_a_, &point_b_}) {
+        const double sm = pm == &point_a_ ? 1.0 : -1.0;
+        const double s = sign(i) * sm;
+        for (size_t r = 0; r < pm->quaternion.size(); ++r) {
+          const QuaternionCoordinate& qc = pm->quaternion[r];
+          double kq = -at.k * s * Ji.dot(qc.dp);
+          if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq_[n + (pm == &point_a_ ? 0 : qa) + r]);
+          if (&pi == pm) {
+            const Eigen::Vector3d turn = li >= qc.first ? Eigen::Vector3d(qc.G * Ji)
+                                                        : Eigen::Vector3d(pi.axis[li].cross(qc.dp));
+            kq += sign(i) * f.dot(turn);
+          }
+          K[sq[i * columns + column++]] += kq;
+        }
       }
     }
   }
@@ -252,7 +295,8 @@ Scene::Patterns& Scene::patterns() const {
     });
     // The attachments' blocks: every pair of the dofs their two points move
     // with (fixed per attachment: taken at the initial state).
-    std::vector<std::vector<std::pair<int, int>>> rows_cols(attachments_.size());
+    std::vector<std::vector<int>> attachment_rows(attachments_.size()),
+        attachment_cols(attachments_.size());
     if (!attachments_.empty()) {
       const State x0 = initial_state();
       const Dimensions& D0 = dims_;
@@ -262,16 +306,30 @@ Scene::Patterns& Scene::patterns() const {
       bv.add_pattern(J0.dF_dv);
       for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
         attachment_points(k, 0.0, q0, v0);
-        std::vector<std::pair<int, int>>& rc = rows_cols[k];  // (v index, q index)
-        for (auto [pk, comp] : {std::make_pair(&point_a_, attachments_[k].a.component),
-                                std::make_pair(&point_b_, attachments_[k].b.component)}) {
-          for (int d : pk->dofs) rc.emplace_back(offsets_[comp].nv + d, offsets_[comp].nq + d);
+        // Rows (velocity indices) and the columns of dF/dq in the order
+        // add_attachment_jacobians() walks them.
+        std::vector<int>& rows = attachment_rows[k];
+        std::vector<int>& cols = attachment_cols[k];
+        auto comp_of = [&](const PointKinematics* pk) {
+          return pk == &point_a_ ? attachments_[k].a.component : attachments_[k].b.component;
+        };
+        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+          const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
+          for (int d : pk->dofs) rows.push_back(o.nv + d);
         }
-        for (auto [ri, qi] : rc) {
-          for (auto [rm, qm] : rc) {
-            bq.add(ri, qm);
-            bv.add(ri, rm);
+        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+          const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
+          for (int qi : pk->q_index) {
+            if (qi >= 0) cols.push_back(o.nq + qi);
           }
+        }
+        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+          const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
+          for (const QuaternionCoordinate& qc : pk->quaternion) cols.push_back(o.nq + qc.q_index);
+        }
+        for (int r : rows) {
+          for (int c : cols) bq.add(r, c);
+          for (int m : rows) bv.add(r, m);
         }
       }
       J0.dF_dq = bq.build();
@@ -280,12 +338,9 @@ Scene::Patterns& Scene::patterns() const {
     L->attachment_q.resize(attachments_.size());
     L->attachment_v.resize(attachments_.size());
     for (size_t k = 0; k < attachments_.size(); ++k) {
-      for (auto [ri, qi] : rows_cols[k]) {
-        (void)qi;
-        for (auto [rm, qm] : rows_cols[k]) {
-          L->attachment_q[k].push_back(slot_of(J0.dF_dq, ri, qm));
-          L->attachment_v[k].push_back(slot_of(J0.dF_dv, ri, rm));
-        }
+      for (int r : attachment_rows[k]) {
+        for (int c : attachment_cols[k]) L->attachment_q[k].push_back(slot_of(J0.dF_dq, r, c));
+        for (int m : attachment_rows[k]) L->attachment_v[k].push_back(slot_of(J0.dF_dv, r, m));
       }
     }
     for (size_t i = 0; i < comps.size(); ++i) {

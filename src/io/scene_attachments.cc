@@ -64,8 +64,8 @@ AttachmentPoint read_attachment_point(const Section& at, const std::string& key,
   }
   if (system.point_elements() == 0) {
     p.fail(link, what + ": component '" + component.Scalar() +
-                     "' has a floating joint or is compliant; attachments need an exact "
-                     "tree of revolute, prismatic and planar joints");
+                     "' is compliant; attachments need the exact formulation "
+                     "(formulation: exact)");
   }
   out.element = body;
   if (p.has("point")) out.local = vector3("point");

@@ -576,11 +576,7 @@ double ArticulatedSystem::energy(const State& s) const {
 }
 
 int ArticulatedSystem::point_elements() const {
-  if (!options_.bushings.empty()) return 0;
-  for (const TreeBody& b : model_.tree.bodies) {
-    if (b.type == JointType::kFloating) return 0;
-  }
-  return model_.bodies();
+  return options_.bushings.empty() ? model_.bodies() : 0;
 }
 
 int ArticulatedSystem::point_dofs(int body) const {
@@ -597,25 +593,30 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
   // The bodies from the root down to `body`, first collected upwards. Each
   // joint is one or more elementary dofs, each a translation along a world
   // direction or a turn about a world axis through a world point: a
-  // revolute or prismatic joint one, a planar joint three (in-plane
+  // revolute or prismatic joint one; a planar joint three (in-plane
   // translations e1 and e2, then the turn about its normal through the
-  // translated origin). q_dot = v for all of them.
+  // translated origin); a floating joint six (translations along its
+  // frame's axes, then turns about the body's own axes through its origin)
+  // and its quaternion's four coordinates (point_kinematics.h).
   std::vector<int>& dofs = out->dofs;
   dofs.clear();
   out->J.clear();
   out->axis.clear();
+  out->quaternion.clear();
   for (int i = body; i >= 0; i = model_.tree.bodies[i].parent) dofs.push_back(i);
   std::reverse(dofs.begin(), dofs.end());
   const int bodies = static_cast<int>(dofs.size());
   // World poses down the path. A URDF child frame is its joint's frame, so
   // body i's world origin and axis are its joint's. J holds each turn's
-  // origin until p is known; axis is zero for a translation.
+  // origin until p is known, and a quaternion coordinate's dp the origin of
+  // its body; axis is zero for a translation.
   Pose<double> world;
   for (int k = 0; k < bodies; ++k) {
     const int i = dofs[k];
     const TreeBody& b = model_.tree.bodies[i];
     const auto qi = q.segment(model_.q_offset[i], joint_nq(b.type));
     const Pose<double> next = compose(world, body_joint_motion<double>(model_, i, qi).pose);
+    const Eigen::Matrix3d frame = world.R * b.placement.linear();
     switch (b.type) {
       case JointType::kRevolute:
         out->axis.push_back(next.R * b.axis);
@@ -628,7 +629,6 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
       case JointType::kPlanar: {
         Eigen::Vector3d e1, e2;
         planar_basis(b.axis, &e1, &e2);
-        const Eigen::Matrix3d frame = world.R * b.placement.linear();
         out->axis.push_back(Eigen::Vector3d::Zero());
         out->J.push_back(frame * e1);
         out->axis.push_back(Eigen::Vector3d::Zero());
@@ -637,23 +637,57 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
         out->J.push_back(next.p);
         break;
       }
-      case JointType::kFloating:
-        throw std::logic_error(name() + ": point kinematics below a floating joint");
+      case JointType::kFloating: {
+        for (int a = 0; a < 3; ++a) {
+          out->axis.push_back(Eigen::Vector3d::Zero());
+          out->J.push_back(frame.col(a));
+        }
+        const int first = static_cast<int>(out->J.size());
+        for (int a = 0; a < 3; ++a) {
+          out->axis.push_back(next.R.col(a));
+          out->J.push_back(next.p);
+        }
+        // G = frame dR/dq_m R^T frame^T, dR/dq_m by forward mode on the
+        // one definition of R(q) (it normalizes q, so G q = 0).
+        using Dual = Eigen::AutoDiffScalar<Eigen::Vector4d>;
+        Eigen::Matrix<Dual, 4, 1> quat;
+        for (int m = 0; m < 4; ++m) quat[m] = Dual(qi[3 + m], 4, m);
+        const Eigen::Matrix<Dual, 3, 3> R = quaternion_rotation<Dual>(quat);
+        Eigen::Matrix3d R0, dR;
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c) R0(r, c) = R(r, c).value();
+        for (int m = 0; m < 4; ++m) {
+          for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 3; ++c) dR(r, c) = R(r, c).derivatives()[m];
+          QuaternionCoordinate qc;
+          qc.q_index = model_.q_offset[i] + 3 + m;
+          qc.G = frame * dR * R0.transpose() * frame.transpose();
+          qc.dp = next.p;
+          qc.first = first;
+          out->quaternion.push_back(qc);
+        }
+        break;
+      }
     }
     world = next;
   }
   out->p = world.R * local + world.p;  // in the base frame until the end
   out->p_dot = root_velocity(t);
+  for (QuaternionCoordinate& qc : out->quaternion) qc.dp = qc.G * (out->p - qc.dp);
   // dofs held the bodies; it now receives their velocity indices, filled
   // from the back so no body is overwritten before it is read (a body's
   // first column is at or after its own position in the list).
   int column = static_cast<int>(out->J.size());
   dofs.resize(column);
+  out->q_index.resize(column);
   for (int k = bodies - 1; k >= 0; --k) {
     const int i = dofs[k];
-    for (int j = joint_nv(model_.tree.bodies[i].type) - 1; j >= 0; --j) {
+    const JointType type = model_.tree.bodies[i].type;
+    for (int j = joint_nv(type) - 1; j >= 0; --j) {
       --column;
       dofs[column] = model_.v_offset[i] + j;
+      // A floating joint's angular velocity has no coordinate of its own.
+      out->q_index[column] = type == JointType::kFloating && j >= 3 ? -1 : model_.q_offset[i] + j;
       if (!out->axis[column].isZero()) {
         out->J[column] = out->axis[column].cross(out->p - out->J[column]);
       }

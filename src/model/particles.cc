@@ -278,10 +278,13 @@ void ParticleSystem::point_kinematics(double t, int node, const Eigen::Vector3d&
   const int di = dof_of_node_[node];
   const int n = di >= 0 ? 3 : 0;
   out->dofs.resize(n);
+  out->q_index.resize(n);
   out->J.resize(n);
   out->axis.resize(n);
+  out->quaternion.clear();
   for (int k = 0; k < n; ++k) {
     out->dofs[k] = di + k;
+    out->q_index[k] = di + k;
     out->J[k] = Eigen::Vector3d::Unit(k);
     out->axis[k].setZero();
   }

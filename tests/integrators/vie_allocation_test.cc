@@ -173,6 +173,32 @@ TEST(VieAllocation, SceneOfTiedRopesAllocatesNothing) {
   EXPECT_GT(st.newton_raphson_iterations, 30);
 }
 
+// A rope hanging from a link of a floating tree: the attachment's point
+// kinematics run through the floating joint (its quaternion's columns) at
+// every force and Jacobian evaluation, into the scene's reserved scratch.
+TEST(VieAllocation, RopeOnAFloatingTreeAllocatesNothing) {
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(std::make_unique<ArticulatedSystem>(branched_tree(true), ArticulatedOptions{}));
+  RopeSpec spec;
+  spec.name = "rope";
+  spec.nodes = 8;
+  spec.total_mass = 0.05;
+  spec.stretch = SpringParameters{1e3, 0.1};
+  spec.bend = SpringParameters{1.0, 0.01};
+  spec.pinned = std::vector<int>{7};
+  parts.push_back(std::make_unique<ParticleSystem>(make_rope(spec)));
+  const int leaf = parts[0]->point_elements() - 1;
+  std::vector<Attachment> grip = {{"grip",
+                                   {0, leaf, Eigen::Vector3d(0.05, 0.0, 0.0)},
+                                   {1, 0, Eigen::Vector3d::Zero()},
+                                   1e3,
+                                   0.5}};
+  const Scene scene("rope on a tree", std::move(parts), std::move(grip));
+  IntegratorStatistics st;
+  EXPECT_EQ(allocations_stepping(scene, ImplicitSettings{}, 1e-3, 0.02, 0.05, &st), 0);
+  EXPECT_GT(st.newton_raphson_iterations, 30);
+}
+
 TEST(VieAllocation, CounterSeesAllocations) {
   g_allocations = 0;
   g_counting = true;

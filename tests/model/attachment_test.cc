@@ -336,6 +336,177 @@ TEST(Attachment, EnergyIsConservedOnAPlanarRootWithoutDampers) {
   EXPECT_GT((rk.state().x - s->initial_state().x).norm(), 1e-2);
 }
 
+// A free body (floating root, turned by a unit quaternion away from the
+// identity) with an arm on a revolute joint below it: a drone with a boom.
+// A rope hangs from the boom's tip, the body is tied to the world and the
+// boom to the body. With `on_a_mast`, the floating joint sits on a mast
+// turning about a revolute joint at the root, so a turn upstream of the
+// quaternion moves its columns too.
+std::unique_ptr<ArticulatedSystem> drone(bool on_a_mast = false) {
+  RigidTree tree;
+  tree.name = "drone";
+  tree.file = "drone (built in code)";
+  if (on_a_mast) {
+    TreeBody mast;
+    mast.link = "mast";
+    mast.joint = "swivel";
+    mast.axis = Vector3d(0.1, -0.2, 1.0).normalized();
+    mast.placement.translation() = Vector3d(0.0, 0.05, 0.0);
+    mast.inertia.mass = 0.5;
+    mast.inertia.com = Vector3d(0.05, 0.0, 0.1);
+    mast.inertia.inertia = Vector3d(1e-3, 2e-3, 1e-3).asDiagonal();
+    tree.bodies.push_back(mast);
+  }
+  const int base = on_a_mast ? 1 : 0;
+  TreeBody body;
+  body.parent = base - 1;
+  body.link = "body";
+  body.joint = "floating_base";
+  body.type = JointType::kFloating;
+  body.placement.translation() = Vector3d(0.02, -0.01, 0.05);
+  body.placement.linear() =
+      Eigen::AngleAxisd(0.3, Vector3d(0.2, 1.0, -0.4).normalized()).toRotationMatrix();
+  body.inertia.mass = 1.0;
+  body.inertia.com = Vector3d(0.01, 0.0, -0.02);
+  body.inertia.inertia = Vector3d(0.02, 0.015, 0.01).asDiagonal();
+  tree.bodies.push_back(body);
+  TreeBody boom;
+  boom.link = "boom";
+  boom.joint = "hinge";
+  boom.parent = base;
+  boom.axis = Vector3d(0.3, 1.0, 0.1).normalized();
+  boom.placement.translation() = Vector3d(0.1, 0.0, -0.05);
+  boom.inertia.mass = 0.1;
+  boom.inertia.com = Vector3d(0.1, 0.0, 0.0);
+  boom.inertia.inertia = Vector3d(1e-4, 1e-3, 1e-3).asDiagonal();
+  tree.bodies.push_back(boom);
+  ArticulatedOptions o;
+  const Eigen::Vector4d quat = Eigen::Vector4d(0.9, 0.2, -0.3, 0.25).normalized();
+  o.initial_q = (VectorXd(8) << 0.1, -0.2, 0.3, quat, 0.4).finished();
+  o.initial_v = (VectorXd(7) << 0.3, -0.1, 0.2, 0.5, -0.7, 0.4, 1.1).finished();
+  if (on_a_mast) {
+    o.initial_q = (VectorXd(9) << 0.6, o.initial_q).finished();
+    o.initial_v = (VectorXd(8) << -0.8, o.initial_v).finished();
+  }
+  return std::make_unique<ArticulatedSystem>(tree, o);
+}
+
+std::unique_ptr<Scene> rope_on_a_drone(double c, bool attached, bool on_a_mast = false) {
+  std::vector<std::unique_ptr<System>> parts;
+  parts.push_back(drone(on_a_mast));
+  const int base = on_a_mast ? 1 : 0;
+  parts.push_back(free_rope("rope", 5, c, Vector3d(0, 0, -9.81), Vector3d(0.2, 0.0, -0.2)));
+  std::vector<Attachment> at;
+  if (attached) {
+    at = {
+        {"grip", {0, base + 1, Vector3d(0.2, 0.01, -0.02)}, {1, 0, Vector3d::Zero()}, 1e3, 2.0 * c},
+        {"tether",
+         {0, base, Vector3d(0.04, 0.02, 0.03)},
+         {-1, 0, Vector3d(0.3, -0.1, 0.6)},
+         40.0,
+         c},
+        {"brace",
+         {0, base, Vector3d(-0.02, 0.05, 0.01)},
+         {0, base + 1, Vector3d(0.05, 0.0, 0.01)},
+         25.0,
+         c}};
+  }
+  return std::make_unique<Scene>("drone", std::move(parts), std::move(at));
+}
+
+class FloatingAttachment : public ::testing::TestWithParam<bool> {};
+
+TEST_P(FloatingAttachment, JacobiansMatchDifferences) {
+  // The attachments' share of K and D (the scene's minus the same scene's
+  // without them), quaternion columns included, against central
+  // differences of their forces: q moves off the unit sphere, where R(q)
+  // normalizes, so the differences are those of the same function.
+  const bool mast = GetParam();
+  const int base = mast ? 1 : 0;
+  const auto with = rope_on_a_drone(0.5, true, mast);
+  const auto without = rope_on_a_drone(0.5, false, mast);
+  ASSERT_EQ(with->component(0).point_elements(), 2 + base);
+  EXPECT_EQ(with->component(0).point_dofs(base + 1), 7 + base);
+  const Dimensions d = with->dimensions();
+  const State x = with->initial_state();
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
+  auto attachment_forces = [&](const VectorXd& qq, const VectorXd& vv) -> VectorXd {
+    return scene_forces(*with, 0.1, qq, vv) - scene_forces(*without, 0.1, qq, vv);
+  };
+  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
+  for (int j = 0; j < d.nq; ++j) {
+    VectorXd qp = q, qm = q;
+    qp[j] += 1e-6;
+    qm[j] -= 1e-6;
+    Kd.col(j) = (attachment_forces(qp, v) - attachment_forces(qm, v)) / 2e-6;
+  }
+  for (int j = 0; j < d.nv; ++j) {
+    VectorXd vp = v, vm = v;
+    vp[j] += 1e-3;
+    vm[j] -= 1e-3;
+    Dd.col(j) = (attachment_forces(q, vp) - attachment_forces(q, vm)) / 2e-3;
+  }
+  auto jacobians = [&](const Scene& s) {
+    ForceJacobians J = s.jacobian_pattern();
+    JacobianRequest complete;
+    complete.complete = true;
+    s.force_jacobians(0.1, q, v, VectorXd(), complete, &J);
+    return std::make_pair(MatrixXd(J.dF_dq), MatrixXd(J.dF_dv));
+  };
+  const auto [Kw, Dw] = jacobians(*with);
+  const auto [Ko, Do] = jacobians(*without);
+  const MatrixXd K = Kw - Ko, D = Dw - Do;
+  // The quaternion columns of the drone's rows and of the rope's are there.
+  EXPECT_GT(Kd.block(0, base + 3, 7 + base, 4).norm(), 1.0);
+  EXPECT_GT(Kd.block(7 + base, base + 3, 15, 4).norm(), 1.0);
+  EXPECT_LT((K - Kd).norm(), 1e-6 * Kd.norm()) << "K\n" << K - Kd;
+  EXPECT_LT((D - Dd).norm(), 1e-8 * Dd.norm()) << "D\n" << D - Dd;
+}
+
+INSTANTIATE_TEST_SUITE_P(RootOrOnAMast, FloatingAttachment, ::testing::Bool());
+
+TEST(Attachment, PointVelocityOnAFloatingRootMatchesDifferences) {
+  // p_dot against the motion of p along q_dot = N(q) v.
+  const auto s = drone();
+  const Dimensions d = s->dimensions();
+  const State x = s->initial_state();
+  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
+  VectorXd qdot(d.nq);
+  s->map_velocity_to_qdot(q, v, qdot);
+  const Vector3d local(0.2, 0.01, -0.02);
+  PointKinematics k, kp, km;
+  s->point_kinematics(0.0, 1, local, q, v, &k);
+  const double dt = 1e-6;
+  s->point_kinematics(0.0, 1, local, q + dt * qdot, v, &kp);
+  s->point_kinematics(0.0, 1, local, q - dt * qdot, v, &km);
+  EXPECT_LT((k.p_dot - (kp.p - km.p) / (2 * dt)).norm(), 1e-8 * k.p_dot.norm());
+  // And each velocity column is dp_dot/dv_j.
+  for (int j = 0; j < d.nv; ++j) {
+    VectorXd vj = VectorXd::Zero(d.nv);
+    vj[j] = 1.0;
+    s->map_velocity_to_qdot(q, vj, qdot);
+    s->point_kinematics(0.0, 1, local, q + dt * qdot, v, &kp);
+    s->point_kinematics(0.0, 1, local, q - dt * qdot, v, &km);
+    EXPECT_LT((k.J[j] - (kp.p - km.p) / (2 * dt)).norm(), 1e-8) << "column " << j;
+  }
+}
+
+TEST(Attachment, EnergyIsConservedOnAFloatingRootWithoutDampers) {
+  const auto s = rope_on_a_drone(0.0, true);
+  IntegratorSettings tight;
+  tight.accuracy = 1e-10;
+  RungeKutta45 rk(*s, tight);
+  rk.initialize(s->initial_state());
+  const double e0 = s->energy(s->initial_state());
+  double worst = 0.0;
+  for (double t = 0.05; t <= 0.3 + 1e-9; t += 0.05) {
+    rk.integrate_to(t);
+    worst = std::max(worst, std::abs(s->energy(rk.state()) - e0));
+  }
+  EXPECT_LT(worst, 1e-7) << "e0 = " << e0;
+  EXPECT_GT((rk.state().x - s->initial_state().x).norm(), 1e-2);
+}
+
 TEST(Attachment, BadPointsAreRejected) {
   auto scene_with = [](Attachment a) {
     std::vector<std::unique_ptr<System>> parts;

@@ -128,9 +128,10 @@ class ArticulatedSystem : public System {
                                  ForceJacobians* J) const override;
   double energy(const State& s) const override;
   // Bodies are points attachments can act on (a point fixed in the body's
-  // frame) when every joint is revolute, prismatic or planar (q_dot = v; a
-  // planar joint moves a point as two translations and a turn). A tree
-  // with a floating joint (q_dot = N(q) v) or bushings offers none.
+  // frame), whatever their joints (point_kinematics.h: a planar joint moves
+  // a point as two translations and a turn, a floating joint as three
+  // translations and three turns, with its quaternion's own columns). A
+  // tree with bushings (the compliant formulation) offers none.
   int point_elements() const override;
   int point_dofs(int body) const override;
   void point_kinematics(double t, int body, const Eigen::Vector3d& local, const ConstVectorRef& q,
