@@ -97,9 +97,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
       if (p->component < 0) continue;
       const System& s = *components_[p->component];
       if (s.point_elements() == 0) {
-        throw InputError(who + ": component '" + s.name() +
-                         "' offers no points to attach to (a tree in the compliant "
-                         "formulation)");
+        throw InputError(who + ": component '" + s.name() + "' offers no points to attach to");
       }
       if (p->element < 0 || p->element >= s.point_elements()) {
         throw InputError(who + ": component '" + s.name() + "' has no point " +

@@ -62,11 +62,6 @@ AttachmentPoint read_attachment_point(const Section& at, const std::string& key,
                      tree.tree().file +
                      "; links welded by fixed joints are merged into their parent)");
   }
-  if (system.point_elements() == 0) {
-    p.fail(link, what + ": component '" + component.Scalar() +
-                     "' is compliant; attachments need the exact formulation "
-                     "(formulation: exact)");
-  }
   out.element = body;
   if (p.has("point")) out.local = vector3("point");
   return out;

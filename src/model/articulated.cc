@@ -575,9 +575,7 @@ double ArticulatedSystem::energy(const State& s) const {
   return e;
 }
 
-int ArticulatedSystem::point_elements() const {
-  return options_.bushings.empty() ? model_.bodies() : 0;
-}
+int ArticulatedSystem::point_elements() const { return model_.bodies(); }
 
 int ArticulatedSystem::point_dofs(int body) const {
   int dofs = 0;

@@ -130,8 +130,9 @@ class ArticulatedSystem : public System {
   // Bodies are points attachments can act on (a point fixed in the body's
   // frame), whatever their joints (point_kinematics.h: a planar joint moves
   // a point as two translations and a turn, a floating joint as three
-  // translations and three turns, with its quaternion's own columns). A
-  // tree with bushings (the compliant formulation) offers none.
+  // translations and three turns, with its quaternion's own columns). In
+  // the compliant formulation every body is a floating root; the bushings
+  // between them are forces and move no point.
   int point_elements() const override;
   int point_dofs(int body) const override;
   void point_kinematics(double t, int body, const Eigen::Vector3d& local, const ConstVectorRef& q,
