@@ -74,7 +74,8 @@ ComponentDrawing draw_particles(const ParticleSystem& system,
   return out;
 }
 
-ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
+ComponentDrawing draw_articulated(const ArticulatedSystem& system,
+                                  const std::vector<AttachmentPoint>& hooks, double t,
                                   const Eigen::VectorXd& x, int q_offset, int v_offset) {
   ComponentDrawing out;
   out.name = system.name();
@@ -103,15 +104,13 @@ ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
     joints.push_back({bu.parent, bu.child, bu.placement.translation()});
   }
 
-  // Velocities from the point kinematics where the tree offers them: each
-  // point is (body, point in its frame), body -1 an anchor on the base.
+  // Velocities from the point kinematics: each point is (body, point in its
+  // frame), body -1 an anchor on the base.
   const Eigen::VectorXd v = x.segment(v_offset, system.dimensions().nv);
-  const bool kinematics = system.point_elements() > 0;
   PointKinematics pk;
   std::vector<Eigen::Vector3d> velocities;
   auto velocity = [&](int body, const Eigen::Vector3d& local) -> Eigen::Vector3d {
     if (body < 0) return system.root_velocity(t);
-    if (!kinematics) return Eigen::Vector3d::Zero();
     system.point_kinematics(t, body, local, q, v, &pk);
     return pk.p_dot;
   };
@@ -139,6 +138,14 @@ ComponentDrawing draw_articulated(const ArticulatedSystem& system, double t,
     out.segments.push_back({i, static_cast<int>(points.size())});
     points.push_back(world[i].p + 2.0 * (world[i].R * com));
     velocities.push_back(velocity(i, 2.0 * com));
+  }
+  // Where attachments hold a body away from its origin, the body reaches
+  // out to the point: a box hung by a corner is drawn to the corner.
+  for (const AttachmentPoint& h : hooks) {
+    if (h.local.isZero(0.0)) continue;
+    out.segments.push_back({h.element, static_cast<int>(points.size())});
+    points.push_back(world[h.element].p + world[h.element].R * h.local);
+    velocities.push_back(velocity(h.element, h.local));
   }
   // A moving base carries every point, the world anchors too.
   const Eigen::Vector3d base = system.root_displacement(t);
@@ -182,7 +189,13 @@ std::vector<ComponentDrawing> draw_scene(
       out.push_back(draw_particles(*particles, triangles, t, x, q_offset, v_offset));
       out.back().component = i;
     } else if (const auto* articulated = dynamic_cast<const ArticulatedSystem*>(&component)) {
-      out.push_back(draw_articulated(*articulated, t, x, q_offset, v_offset));
+      std::vector<AttachmentPoint> hooks;
+      for (const Attachment& at : scene.attachments()) {
+        for (const AttachmentPoint* p : {&at.a, &at.b}) {
+          if (p->component == i) hooks.push_back(*p);
+        }
+      }
+      out.push_back(draw_articulated(*articulated, hooks, t, x, q_offset, v_offset));
       out.back().component = i;
     }
   }

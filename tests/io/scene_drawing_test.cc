@@ -146,6 +146,35 @@ TEST(SceneDrawing, CompliantChainIsDrawnLikeTheExactOne) {
   expect_chain_2(drawing[0], a, b);
 }
 
+TEST(SceneDrawing, BodyReachesOutToItsAttachmentPoint) {
+  // models/box_on_rope.yaml: the free box is one body whose centre of mass
+  // is its origin, so without its hook it would be a lone point. Its
+  // drawing is the origin and the hooked corner joined by a segment, the
+  // corner where the rope's first node starts, moving as the rigid body
+  // moves it.
+  const SceneConfig config = load_scene(model_path("box_on_rope.yaml"));
+  const Scene& scene = *config.scene;
+  Eigen::VectorXd x = scene.initial_state().x;
+  const Dimensions d = scene.dimensions();
+  // Turn the box a quarter turn about z and spin it about x.
+  x.segment<4>(3) = Eigen::Vector4d(std::sqrt(0.5), 0.0, 0.0, std::sqrt(0.5));
+  x[d.nq + 3] = 2.0;
+  const auto drawing = draw_scene(scene, config.surfaces, 0.0, x);
+  ASSERT_EQ(drawing.size(), 2u);
+  const ComponentDrawing& box = drawing[0];
+  ASSERT_EQ(box.points.cols(), 2);
+  ASSERT_EQ(box.segments.size(), 1u);
+  EXPECT_EQ(box.segments[0], (std::array<int, 2>{0, 1}));
+  // (0.05, 0.1, -0.2) turned a quarter about z: (-0.1, 0.05, -0.2).
+  EXPECT_LT((box.points.col(1) - Eigen::Vector3d(-0.1, 0.05, -0.2)).norm(), 1e-12);
+  // omega = 2 about the body's x, which the turn sent to the world's y:
+  // (0, 2, 0) x (-0.1, 0.05, -0.2) = (-0.4, 0, 0.2).
+  EXPECT_LT((box.velocities.col(1) - Eigen::Vector3d(-0.4, 0.0, 0.2)).norm(), 1e-12);
+  // Unturned, the corner is where the rope starts.
+  const auto still = draw_scene(scene, config.surfaces, 0.0, scene.initial_state().x);
+  EXPECT_LT((still[0].points.col(1) - still[1].points.col(0)).norm(), 1e-12);
+}
+
 TEST(SceneDrawing, StateOfTheWrongSizeIsRejected) {
   const SceneConfig config = load_scene(model_path("rope.yaml"), {"rope.nodes=4"});
   EXPECT_THROW(draw_scene(*config.scene, config.surfaces, 0.0, Eigen::VectorXd::Zero(5)),

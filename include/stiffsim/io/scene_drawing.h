@@ -17,9 +17,11 @@
 // parent is the world) at the joint frame's origin, then one per leaf body
 // whose centre of mass is off its origin, at origin + 2 (COM - origin): the
 // far end of a uniform rod hung from its joint, so the last link of a chain
-// is drawn too; a base moved by a root motion carries them all. Segments:
-// each joint's parent point (body origin or world anchor) to its child's
-// origin, and each leaf's origin to its tip.
+// is drawn too, then one per attachment point on a body away from its
+// origin (a box hung by a corner reaches out to the corner); a base moved
+// by a root motion carries them all. Segments: each joint's parent point
+// (body origin or world anchor) to its child's origin, each leaf's origin
+// to its tip and each body's origin to its attachment points.
 //
 // Components with no geometry (pure ODE systems) are left out.
 
@@ -37,8 +39,7 @@ struct ComponentDrawing {
   int component = 0;                         // its index in the scene
   Eigen::Matrix3Xd points;                   // world positions, m
   // World velocities of the points, m/s: a node's; a tree's from its point
-  // kinematics (zero on trees that offer none: floating, planar or
-  // compliant), an anchor's its base's.
+  // kinematics, an anchor's its base's.
   Eigen::Matrix3Xd velocities;
   std::vector<std::array<int, 2>> segments;  // pairs of point indices
   // The surface triangles drawn (in point numbering), where the component
