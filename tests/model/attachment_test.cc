@@ -414,6 +414,46 @@ std::unique_ptr<Scene> rope_on_a_drone(double c, bool attached, bool on_a_mast =
   return std::make_unique<Scene>("drone", std::move(parts), std::move(at));
 }
 
+// The attachments' share of K and D at (q, v) (the scene's minus the same
+// scene's without them, so the components' own Jacobians, checked
+// elsewhere, drop out) and the central differences of their forces.
+struct AttachmentShare {
+  MatrixXd K, D, Kd, Dd;
+};
+
+AttachmentShare attachment_share(const Scene& with, const Scene& without, const VectorXd& q,
+                                 const VectorXd& v) {
+  const Dimensions d = with.dimensions();
+  auto forces = [&](const VectorXd& qq, const VectorXd& vv) -> VectorXd {
+    return scene_forces(with, 0.1, qq, vv) - scene_forces(without, 0.1, qq, vv);
+  };
+  AttachmentShare out{MatrixXd(), MatrixXd(), MatrixXd(d.nv, d.nq), MatrixXd(d.nv, d.nv)};
+  for (int j = 0; j < d.nq; ++j) {
+    VectorXd qp = q, qm = q;
+    qp[j] += 1e-6;
+    qm[j] -= 1e-6;
+    out.Kd.col(j) = (forces(qp, v) - forces(qm, v)) / 2e-6;
+  }
+  for (int j = 0; j < d.nv; ++j) {
+    VectorXd vp = v, vm = v;
+    vp[j] += 1e-3;
+    vm[j] -= 1e-3;
+    out.Dd.col(j) = (forces(q, vp) - forces(q, vm)) / 2e-3;
+  }
+  auto jacobians = [&](const Scene& s) {
+    ForceJacobians J = s.jacobian_pattern();
+    JacobianRequest complete;
+    complete.complete = true;
+    s.force_jacobians(0.1, q, v, VectorXd(), complete, &J);
+    return std::make_pair(MatrixXd(J.dF_dq), MatrixXd(J.dF_dv));
+  };
+  const auto [Kw, Dw] = jacobians(with);
+  const auto [Ko, Do] = jacobians(without);
+  out.K = Kw - Ko;
+  out.D = Dw - Do;
+  return out;
+}
+
 class FloatingAttachment : public ::testing::TestWithParam<bool> {};
 
 TEST_P(FloatingAttachment, JacobiansMatchDifferences) {
@@ -429,33 +469,8 @@ TEST_P(FloatingAttachment, JacobiansMatchDifferences) {
   EXPECT_EQ(with->component(0).point_dofs(base + 1), 7 + base);
   const Dimensions d = with->dimensions();
   const State x = with->initial_state();
-  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
-  auto attachment_forces = [&](const VectorXd& qq, const VectorXd& vv) -> VectorXd {
-    return scene_forces(*with, 0.1, qq, vv) - scene_forces(*without, 0.1, qq, vv);
-  };
-  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
-  for (int j = 0; j < d.nq; ++j) {
-    VectorXd qp = q, qm = q;
-    qp[j] += 1e-6;
-    qm[j] -= 1e-6;
-    Kd.col(j) = (attachment_forces(qp, v) - attachment_forces(qm, v)) / 2e-6;
-  }
-  for (int j = 0; j < d.nv; ++j) {
-    VectorXd vp = v, vm = v;
-    vp[j] += 1e-3;
-    vm[j] -= 1e-3;
-    Dd.col(j) = (attachment_forces(q, vp) - attachment_forces(q, vm)) / 2e-3;
-  }
-  auto jacobians = [&](const Scene& s) {
-    ForceJacobians J = s.jacobian_pattern();
-    JacobianRequest complete;
-    complete.complete = true;
-    s.force_jacobians(0.1, q, v, VectorXd(), complete, &J);
-    return std::make_pair(MatrixXd(J.dF_dq), MatrixXd(J.dF_dv));
-  };
-  const auto [Kw, Dw] = jacobians(*with);
-  const auto [Ko, Do] = jacobians(*without);
-  const MatrixXd K = Kw - Ko, D = Dw - Do;
+  const auto [K, D, Kd, Dd] =
+      attachment_share(*with, *without, x.x.head(d.nq), x.x.segment(d.nq, d.nv));
   // The quaternion columns of the drone's rows and of the rope's are there.
   EXPECT_GT(Kd.block(0, base + 3, 7 + base, 4).norm(), 1.0);
   EXPECT_GT(Kd.block(7 + base, base + 3, 15, 4).norm(), 1.0);
@@ -527,36 +542,12 @@ TEST(Attachment, JacobiansMatchDifferencesOnACompliantChain) {
   const auto with = scene(true), without = scene(false);
   const Dimensions d = with->dimensions();
   const State x = moving_state(*with);
-  const VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv);
-  auto share = [&](const VectorXd& qq, const VectorXd& vv) -> VectorXd {
-    return scene_forces(*with, 0.1, qq, vv) - scene_forces(*without, 0.1, qq, vv);
-  };
-  MatrixXd Kd(d.nv, d.nq), Dd(d.nv, d.nv);
-  for (int j = 0; j < d.nq; ++j) {
-    VectorXd qp = q, qm = q;
-    qp[j] += 1e-6;
-    qm[j] -= 1e-6;
-    Kd.col(j) = (share(qp, v) - share(qm, v)) / 2e-6;
-  }
-  for (int j = 0; j < d.nv; ++j) {
-    VectorXd vp = v, vm = v;
-    vp[j] += 1e-3;
-    vm[j] -= 1e-3;
-    Dd.col(j) = (share(q, vp) - share(q, vm)) / 2e-3;
-  }
-  auto jacobians = [&](const Scene& s) {
-    ForceJacobians J = s.jacobian_pattern();
-    JacobianRequest complete;
-    complete.complete = true;
-    s.force_jacobians(0.1, q, v, VectorXd(), complete, &J);
-    return std::make_pair(MatrixXd(J.dF_dq), MatrixXd(J.dF_dv));
-  };
-  const auto [Kw, Dw] = jacobians(*with);
-  const auto [Ko, Do] = jacobians(*without);
+  const auto [K, D, Kd, Dd] =
+      attachment_share(*with, *without, x.x.head(d.nq), x.x.segment(d.nq, d.nv));
   // The last link's quaternion columns (7 * 2 + 3..6) in the rope's rows.
   EXPECT_GT(Kd.block(18, 17, 15, 4).norm(), 1.0);
-  EXPECT_LT((Kw - Ko - Kd).norm(), 1e-6 * Kd.norm()) << "K\n" << Kw - Ko - Kd;
-  EXPECT_LT((Dw - Do - Dd).norm(), 1e-8 * Dd.norm()) << "D\n" << Dw - Do - Dd;
+  EXPECT_LT((K - Kd).norm(), 1e-6 * Kd.norm()) << "K\n" << K - Kd;
+  EXPECT_LT((D - Dd).norm(), 1e-8 * Dd.norm()) << "D\n" << D - Dd;
 }
 
 TEST(Attachment, RopeSwingsAlikeOnExactAndCompliantChains) {
