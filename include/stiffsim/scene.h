@@ -119,8 +119,10 @@ class Scene : public System {
     std::vector<Slots> slots;
     std::vector<SparseMatrix> scratch_M;
     std::vector<ForceJacobians> scratch_J;
-    // Per attachment, the slots of its blocks in dF/dq and dF/dv
-    // (row-major over the dofs of point a, then point b).
+    // Per attachment, the slots of its blocks in dF/dq and dF/dv, row-major:
+    // rows are the velocity dofs of point a, then point b; dF/dv's columns
+    // the same, dF/dq's the position coordinates in the order
+    // add_attachment_jacobians() walks them (point_kinematics.h).
     std::vector<std::vector<int>> attachment_q, attachment_v;
   };
   Patterns& patterns() const;

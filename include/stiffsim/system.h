@@ -151,8 +151,9 @@ class System {
   // (point_kinematics.h): their number (particle nodes, bodies of a tree;
   // 0 when the system offers none), the most dofs one of them moves with,
   // and one point's kinematics: `element` with the offset `local` in its
-  // frame, at (t, q, v). Only for systems with q_dot = v; allocates
-  // nothing when `out` has room for point_dofs(element) entries.
+  // frame, at (t, q, v). Position coordinates without a velocity of their
+  // own (a quaternion) get their own columns; allocates nothing when `out`
+  // has room for point_dofs(element) entries in each of its lists.
   virtual int point_elements() const { return 0; }
   virtual int point_dofs(int element) const {
     (void)element;

@@ -59,6 +59,8 @@ def test_overrides_use_the_keys_of_set(models):
     ("rope.yaml", ROPE_SMALL, {"integrator": "vie", "step": 1e-3, "fixed_step": True}),
     ("rope.yaml", ROPE_SMALL, {"integrator": "rk45", "accuracy": 1e-4}),
     ("chain10.yaml", None, {"integrator": "vie", "accuracy": 1e-3}),
+    # A free box hung on a rope: an attachment through a floating joint.
+    ("box_on_rope.yaml", None, {"integrator": "vie", "step": 1e-3, "fixed_step": True}),
 ])
 def test_steps_equal_the_cli_trajectory_bit_for_bit(models, cli, tmp_path, scene_file, overrides,
                                                     options):
