@@ -199,12 +199,15 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
         below -= v[ov + pk->dofs[m]] * pk->J[m];
         above += v[ov + pk->dofs[m]] * pk->axis[m];
       }
+      // Coordinates are listed root first, so `first` never decreases and
+      // the sums run once down the dofs (a joint's four share them).
+      Eigen::Vector3d turning = all, upstream = Eigen::Vector3d::Zero();
+      int summed = 0;  // dofs before `first` taken out of turning so far
       for (size_t r = 0; r < pk->quaternion.size(); ++r) {
         const QuaternionCoordinate& qc = pk->quaternion[r];
-        Eigen::Vector3d turning = all, upstream = Eigen::Vector3d::Zero();
-        for (int j = 0; j < qc.first; ++j) {
-          turning -= v[ov + pk->dofs[j]] * pk->J[j];
-          upstream += v[ov + pk->dofs[j]] * pk->axis[j];
+        for (; summed < qc.first; ++summed) {
+          turning -= v[ov + pk->dofs[summed]] * pk->J[summed];
+          upstream += v[ov + pk->dofs[summed]] * pk->axis[summed];
         }
         dp_dot_dq_[n + (is_a ? 0 : qa) + r] = qc.G * turning + upstream.cross(qc.dp);
       }
