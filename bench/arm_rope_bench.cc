@@ -39,9 +39,10 @@ void BM_ArmRopeEvaluation(benchmark::State& state) {
   const Eigen::VectorXd q = x.x.head(d.nq), v = x.x.segment(d.nq, d.nv), z;
   Eigen::VectorXd F(d.nv);
   ForceJacobians J = s.jacobian_pattern();
+  const std::unique_ptr<SystemData> data = s.make_data();
   for (auto _ : state) {
-    s.forces(0.1, q, v, z, F);
-    s.force_jacobians(0.1, q, v, z, JacobianRequest{}, &J);
+    s.forces(*data, 0.1, q, v, z, F);
+    s.force_jacobians(*data, 0.1, q, v, z, JacobianRequest{}, &J);
     benchmark::DoNotOptimize(F.data());
     benchmark::DoNotOptimize(J.dF_dq.valuePtr());
   }

@@ -27,33 +27,36 @@ std::unique_ptr<ArticulatedSystem> make_system(int links, bool compliant) {
 
 void BM_Forces(benchmark::State& state) {
   const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const std::unique_ptr<SystemData> data = sys->make_data();
   const State x = sys->initial_state();
   const Dimensions d = sys->dimensions();
   Eigen::VectorXd F(d.nv);
   for (auto _ : state) {
-    sys->forces(0.0, x.q(d), x.v(d), x.z(d), F);
+    sys->forces(*data, 0.0, x.q(d), x.v(d), x.z(d), F);
     benchmark::DoNotOptimize(F.data());
   }
 }
 
 void BM_MassMatrix(benchmark::State& state) {
   const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const std::unique_ptr<SystemData> data = sys->make_data();
   const State x = sys->initial_state();
   const Dimensions d = sys->dimensions();
   SparseMatrix M = sys->mass_matrix_pattern();
   for (auto _ : state) {
-    sys->mass_matrix(x.q(d), &M);
+    sys->mass_matrix(*data, x.q(d), &M);
     benchmark::DoNotOptimize(M.valuePtr());
   }
 }
 
 void BM_Jacobians(benchmark::State& state) {
   const auto sys = make_system(static_cast<int>(state.range(0)), state.range(1) != 0);
+  const std::unique_ptr<SystemData> data = sys->make_data();
   const State x = sys->initial_state();
   const Dimensions d = sys->dimensions();
   ForceJacobians J = sys->jacobian_pattern();
   for (auto _ : state) {
-    sys->force_jacobians(0.0, x.q(d), x.v(d), x.z(d), JacobianRequest{}, &J);
+    sys->force_jacobians(*data, 0.0, x.q(d), x.v(d), x.z(d), JacobianRequest{}, &J);
     benchmark::DoNotOptimize(J.dF_dq.valuePtr());
   }
   state.counters["passes"] = sys->jacobian_passes();
@@ -65,6 +68,7 @@ void BM_ExactJacobians(benchmark::State& state) {
   const int links = static_cast<int>(state.range(0));
   const bool analytic = state.range(1) != 0;
   const auto sys = make_system(links, false);
+  const std::unique_ptr<SystemData> data = sys->make_data();
   const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(links, 0.1, 0.4);
   const Eigen::VectorXd v = Eigen::VectorXd::LinSpaced(links, -1.0, 1.0);
   const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(links, 2.0, -3.0);
@@ -76,7 +80,7 @@ void BM_ExactJacobians(benchmark::State& state) {
     if (analytic) {
       rnea.compute(q, v, a.data(), &J.dF_dq, &J.dF_dv);
     } else {
-      sys->automatic_force_jacobians(0.0, q, v, Eigen::VectorXd(), request, &J);
+      sys->automatic_force_jacobians(*data, 0.0, q, v, Eigen::VectorXd(), request, &J);
     }
     benchmark::DoNotOptimize(J.dF_dq.valuePtr());
     benchmark::DoNotOptimize(J.dF_dv.valuePtr());
@@ -93,6 +97,7 @@ void BM_CompliantJacobians(benchmark::State& state) {
   o.initial_v = Eigen::VectorXd::LinSpaced(links, -1.0, 1.0);
   o.joint_forces.assign(links, JointForce{10.0, 0.0, 0.1});
   const auto sys = make_compliant(make_chain_tree(links), o, BushingParameters{});
+  const std::unique_ptr<SystemData> data = sys->make_data();
   const State x = sys->initial_state();
   const Dimensions d = sys->dimensions();
   const Eigen::VectorXd a = Eigen::VectorXd::LinSpaced(d.nv, 2.0, -3.0);
@@ -101,9 +106,9 @@ void BM_CompliantJacobians(benchmark::State& state) {
   request.acceleration = a.data();
   for (auto _ : state) {
     if (analytic) {
-      sys->force_jacobians(0.0, x.q(d), x.v(d), x.z(d), request, &J);
+      sys->force_jacobians(*data, 0.0, x.q(d), x.v(d), x.z(d), request, &J);
     } else {
-      sys->automatic_force_jacobians(0.0, x.q(d), x.v(d), x.z(d), request, &J);
+      sys->automatic_force_jacobians(*data, 0.0, x.q(d), x.v(d), x.z(d), request, &J);
     }
     benchmark::DoNotOptimize(J.dF_dq.valuePtr());
     benchmark::DoNotOptimize(J.dF_dv.valuePtr());

@@ -48,7 +48,6 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
   for (const auto& c : components_) {
     offsets_.push_back(dims_);
     const Dimensions d = c->dimensions();
-    component_states_.emplace_back(0.0, Eigen::VectorXd(d.nx()));
     dims_.nq += d.nq;
     dims_.nv += d.nv;
     dims_.nz += d.nz;
@@ -80,10 +79,8 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
     slots_N_.push_back(own_N ? slots_in(velocity_map_pattern_, c.velocity_map_pattern(),
                                         offsets_[i].nq, offsets_[i].nv)
                              : std::vector<int>());
-    scratch_N_.push_back(own_N ? c.velocity_map_pattern() : SparseMatrix());
   }
 
-  int most_dofs = 0;
   for (const Attachment& at : attachments_) {
     const std::string who = name_ + ": attachment '" + at.name + "'";
     if (!(std::isfinite(at.k) && at.k >= 0.0 && std::isfinite(at.c) && at.c >= 0.0)) {
@@ -104,26 +101,55 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
                          std::to_string(p->element) + " (0.." +
                          std::to_string(s.point_elements() - 1) + ")");
       }
-      most_dofs = std::max(most_dofs, s.point_dofs(p->element));
+      most_point_dofs_ = std::max(most_point_dofs_, s.point_dofs(p->element));
     }
   }
-  for (PointKinematics* p : {&point_a_, &point_b_}) {
-    p->dofs.reserve(most_dofs);
-    p->q_index.reserve(most_dofs);
-    p->J.reserve(most_dofs);
-    p->axis.reserve(most_dofs);
-    // Four quaternion coordinates per floating joint, which has six dofs.
-    p->quaternion.reserve(most_dofs);
-  }
-  // Both points' dofs and quaternion coordinates at once
-  // (add_attachment_jacobians).
-  dp_dot_dq_.reserve(4 * most_dofs);
 }
 
-void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
-                              const ConstVectorRef& v) const {
+// Everything a scene's evaluations write: the components' own data, the
+// scratch of the attachments' points, and matrices with the components'
+// own patterns to gather from.
+struct Scene::Data : SystemData {
+  std::vector<std::unique_ptr<SystemData>> components;
+  PointKinematics point_a, point_b;
+  // dp_dot/dq per column of both points (add_attachment_jacobians()).
+  std::vector<Eigen::Vector3d> dp_dot_dq;
+  // Per component, a state to hand energy().
+  std::vector<State> component_states;
+  // Per component with N != I, its N (velocity_map()).
+  std::vector<SparseMatrix> N;
+  // Per component, its M and Jacobians; made on first use (with the
+  // patterns, which a run on a structured Newton matrix never needs).
+  std::vector<SparseMatrix> M;
+  std::vector<ForceJacobians> J;
+};
+
+std::unique_ptr<SystemData> Scene::make_data() const {
+  auto data = std::make_unique<Data>();
+  for (size_t i = 0; i < components_.size(); ++i) {
+    const System& c = *components_[i];
+    data->components.push_back(c.make_data());
+    data->component_states.emplace_back(0.0, Eigen::VectorXd(c.dimensions().nx()));
+    data->N.push_back(slots_N_[i].empty() ? SparseMatrix() : c.velocity_map_pattern());
+  }
+  const int most = most_point_dofs_;
+  for (PointKinematics* p : {&data->point_a, &data->point_b}) {
+    p->dofs.reserve(most);
+    p->q_index.reserve(most);
+    p->J.reserve(most);
+    p->axis.reserve(most);
+    // Four quaternion coordinates per floating joint, which has six dofs.
+    p->quaternion.reserve(most);
+  }
+  // Both points' dofs and quaternion coordinates at once.
+  data->dp_dot_dq.reserve(4 * most);
+  return data;
+}
+
+void Scene::attachment_points(int k, double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                              PointKinematics* a, PointKinematics* b) const {
   const Attachment& at = attachments_[k];
-  for (auto [p, out] : {std::make_pair(&at.a, &point_a_), std::make_pair(&at.b, &point_b_)}) {
+  for (auto [p, out] : {std::make_pair(&at.a, a), std::make_pair(&at.b, b)}) {
     if (p->component < 0) {
       out->p = p->local;
       out->p_dot.setZero();
@@ -141,52 +167,58 @@ void Scene::attachment_points(int k, double t, const ConstVectorRef& q,
   }
 }
 
-Eigen::Vector3d Scene::attachment_force(const Attachment& at) const {
-  return at.k * (point_b_.p - point_a_.p) + at.c * (point_b_.p_dot - point_a_.p_dot);
+Eigen::Vector3d Scene::attachment_force(const Attachment& at, const PointKinematics& a,
+                                        const PointKinematics& b) {
+  return at.k * (b.p - a.p) + at.c * (b.p_dot - a.p_dot);
 }
 
-void Scene::add_attachment_forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                  double scale, VectorRef F) const {
+void Scene::add_attachment_forces(Data& data, double t, const ConstVectorRef& q,
+                                  const ConstVectorRef& v, double scale, VectorRef F) const {
+  const PointKinematics& point_a = data.point_a;
+  const PointKinematics& point_b = data.point_b;
   for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
     const Attachment& at = attachments_[k];
-    attachment_points(k, t, q, v);
+    attachment_points(k, t, q, v, &data.point_a, &data.point_b);
     // On point a; -f on point b. Generalized forces by virtual work: J^T f.
-    const Eigen::Vector3d f = scale * attachment_force(at);
+    const Eigen::Vector3d f = scale * attachment_force(at, point_a, point_b);
     const int oa = at.a.component < 0 ? 0 : offsets_[at.a.component].nv;
     const int ob = at.b.component < 0 ? 0 : offsets_[at.b.component].nv;
-    for (size_t j = 0; j < point_a_.dofs.size(); ++j) F[oa + point_a_.dofs[j]] += point_a_.J[j].dot(f);
-    for (size_t j = 0; j < point_b_.dofs.size(); ++j) F[ob + point_b_.dofs[j]] -= point_b_.J[j].dot(f);
+    for (size_t j = 0; j < point_a.dofs.size(); ++j) F[oa + point_a.dofs[j]] += point_a.J[j].dot(f);
+    for (size_t j = 0; j < point_b.dofs.size(); ++j) F[ob + point_b.dofs[j]] -= point_b.J[j].dot(f);
   }
 }
 
-void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                     bool complete, ForceJacobians* J) const {
-  // First: building the patterns evaluates the points at the initial state.
+void Scene::add_attachment_jacobians(Data& data, double t, const ConstVectorRef& q,
+                                     const ConstVectorRef& v, bool complete,
+                                     ForceJacobians* J) const {
   const Patterns& L = patterns();
   double* K = J->dF_dq.valuePtr();
   double* D = J->dF_dv.valuePtr();
+  const PointKinematics& point_a = data.point_a;
+  const PointKinematics& point_b = data.point_b;
+  std::vector<Eigen::Vector3d>& dp_dot_dq = data.dp_dot_dq;
   for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
     const Attachment& at = attachments_[k];
-    attachment_points(k, t, q, v);
-    const Eigen::Vector3d f = attachment_force(at);
-    const int na = static_cast<int>(point_a_.dofs.size());
-    const int n = na + static_cast<int>(point_b_.dofs.size());
+    attachment_points(k, t, q, v, &data.point_a, &data.point_b);
+    const Eigen::Vector3d f = attachment_force(at, point_a, point_b);
+    const int na = static_cast<int>(point_a.dofs.size());
+    const int n = na + static_cast<int>(point_b.dofs.size());
     // Rows are the velocity dofs of a then b, s = +1 on a's, -1 on b's:
     //   F_i = s_i J_i . f,  df/dq_m = -s_m (k dp/dq_m + c dp_dot/dq_m),
     //   df/dv_m = -s_m c J_m, and on one point's own columns the turn of
     //   its rows, s_i f . dJ_i/dq_m (point_kinematics.h). Columns of dF/dq
     //   are the coordinates of a then b: those of dofs with q_dot = v in
     //   dof order, then the quaternions'.
-    auto point = [&](int i) -> const PointKinematics& { return i < na ? point_a_ : point_b_; };
+    auto point = [&](int i) -> const PointKinematics& { return i < na ? point_a : point_b; };
     auto local = [&](int i) { return i < na ? i : i - na; };
     auto sign = [&](int i) { return i < na ? 1.0 : -1.0; };
     // dp_dot/dq_m = axis_m x (sum_{j >= m} v_j J_j) + (sum_{j < m} v_j axis_j) x J_m
     // per dof m, then per quaternion coordinate
     // G (sum_{j >= first} v_j J_j) + (sum_{j < first} v_j axis_j) x dp.
-    const int qa = static_cast<int>(point_a_.quaternion.size());
-    dp_dot_dq_.resize(n + qa + point_b_.quaternion.size());
-    for (const PointKinematics* pk : {&point_a_, &point_b_}) {
-      const bool is_a = pk == &point_a_;
+    const int qa = static_cast<int>(point_a.quaternion.size());
+    dp_dot_dq.resize(n + qa + point_b.quaternion.size());
+    for (const PointKinematics* pk : {&point_a, &point_b}) {
+      const bool is_a = pk == &point_a;
       const int first = is_a ? 0 : na;
       const int count = static_cast<int>(pk->dofs.size());
       const int component = is_a ? at.a.component : at.b.component;
@@ -195,7 +227,7 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
       for (int j = 0; j < count; ++j) below += v[ov + pk->dofs[j]] * pk->J[j];
       const Eigen::Vector3d all = below;
       for (int m = 0; m < count; ++m) {
-        dp_dot_dq_[first + m] = pk->axis[m].cross(below) + above.cross(pk->J[m]);
+        dp_dot_dq[first + m] = pk->axis[m].cross(below) + above.cross(pk->J[m]);
         below -= v[ov + pk->dofs[m]] * pk->J[m];
         above += v[ov + pk->dofs[m]] * pk->axis[m];
       }
@@ -209,7 +241,7 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
           turning -= v[ov + pk->dofs[summed]] * pk->J[summed];
           upstream += v[ov + pk->dofs[summed]] * pk->axis[summed];
         }
-        dp_dot_dq_[n + (is_a ? 0 : qa) + r] = qc.G * turning + upstream.cross(qc.dp);
+        dp_dot_dq[n + (is_a ? 0 : qa) + r] = qc.G * turning + upstream.cross(qc.dp);
       }
     }
     const std::vector<int>& sq = L.attachment_q[k];
@@ -228,7 +260,7 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
         D[sv[i * n + m]] += -at.c * s * Ji.dot(Jm);
         if (pm.q_index[local(m)] < 0) continue;
         double kq = -at.k * s * Ji.dot(Jm);
-        if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq_[m]);
+        if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq[m]);
         if (&pi == &pm) {
           const int lm = local(m);
           const Eigen::Vector3d turn =
@@ -238,13 +270,13 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
         K[sq[i * columns + column++]] += kq;
       }
       // Quaternion coordinates.
-      for (const PointKinematics* pm : {&point_a_, &point_b_}) {
-        const double sm = pm == &point_a_ ? 1.0 : -1.0;
+      for (const PointKinematics* pm : {&point_a, &point_b}) {
+        const double sm = pm == &point_a ? 1.0 : -1.0;
         const double s = sign(i) * sm;
         for (size_t r = 0; r < pm->quaternion.size(); ++r) {
           const QuaternionCoordinate& qc = pm->quaternion[r];
           double kq = -at.k * s * Ji.dot(qc.dp);
-          if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq_[n + (pm == &point_a_ ? 0 : qa) + r]);
+          if (complete) kq -= at.c * s * Ji.dot(dp_dot_dq[n + (pm == &point_a ? 0 : qa) + r]);
           if (&pi == pm) {
             const Eigen::Vector3d turn = li >= qc.first ? Eigen::Vector3d(qc.G * Ji)
                                                         : Eigen::Vector3d(pi.axis[li].cross(qc.dp));
@@ -257,7 +289,7 @@ void Scene::add_attachment_jacobians(double t, const ConstVectorRef& q, const Co
   }
 }
 
-Scene::Patterns& Scene::patterns() const {
+const Scene::Patterns& Scene::patterns() const {
   std::call_once(patterns_built_, [this] {
     auto L = std::make_unique<Patterns>();
     using P = std::pair<int, int>;
@@ -305,26 +337,27 @@ Scene::Patterns& Scene::patterns() const {
       PatternBuilder bq(D0.nv, D0.nq), bv(D0.nv, D0.nv);
       bq.add_pattern(J0.dF_dq);
       bv.add_pattern(J0.dF_dv);
+      PointKinematics point_a, point_b;
       for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
-        attachment_points(k, 0.0, q0, v0);
+        attachment_points(k, 0.0, q0, v0, &point_a, &point_b);
         // Rows (velocity indices) and the columns of dF/dq in the order
         // add_attachment_jacobians() walks them.
         std::vector<int>& rows = attachment_rows[k];
         std::vector<int>& cols = attachment_cols[k];
         auto comp_of = [&](const PointKinematics* pk) {
-          return pk == &point_a_ ? attachments_[k].a.component : attachments_[k].b.component;
+          return pk == &point_a ? attachments_[k].a.component : attachments_[k].b.component;
         };
-        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+        for (const PointKinematics* pk : {&point_a, &point_b}) {
           const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
           for (int d : pk->dofs) rows.push_back(o.nv + d);
         }
-        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+        for (const PointKinematics* pk : {&point_a, &point_b}) {
           const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
           for (int qi : pk->q_index) {
             if (qi >= 0) cols.push_back(o.nq + qi);
           }
         }
-        for (const PointKinematics* pk : {&point_a_, &point_b_}) {
+        for (const PointKinematics* pk : {&point_a, &point_b}) {
           const Dimensions& o = offsets_[std::max(comp_of(pk), 0)];
           for (const QuaternionCoordinate& qc : pk->quaternion) cols.push_back(o.nq + qc.q_index);
         }
@@ -357,8 +390,6 @@ Scene::Patterns& Scene::patterns() const {
       s.dfz_dv = slots_in(J0.dfz_dv, J.dfz_dv, o.nz, o.nv);
       s.dfz_dz = slots_in(J0.dfz_dz, J.dfz_dz, o.nz, o.nz);
       L->slots.push_back(std::move(s));
-      L->scratch_M.push_back(c.mass_matrix_pattern());
-      L->scratch_J.push_back(J);
     }
     patterns_ = std::move(L);
   });
@@ -414,18 +445,19 @@ void Scene::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& 
   }
 }
 
-void Scene::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
-  if (caps_.identity_velocity_map) return System::velocity_map(q, N);
+void Scene::velocity_map(SystemData& data, const ConstVectorRef& q, SparseMatrix* N) const {
+  if (caps_.identity_velocity_map) return System::velocity_map(data, q, N);
+  Data& d = static_cast<Data&>(data);
   set_zero_keep_pattern(N);
   for (size_t i = 0; i < components_.size(); ++i) {
     const System& c = *components_[i];
-    const Dimensions d = c.dimensions();
+    const Dimensions n = c.dimensions();
     const Dimensions& o = offsets_[i];
     if (c.capabilities().identity_velocity_map) {
-      for (int k = 0; k < d.nv; ++k) N->coeffRef(o.nq + k, o.nv + k) = 1.0;
+      for (int k = 0; k < n.nv; ++k) N->coeffRef(o.nq + k, o.nv + k) = 1.0;
     } else {
-      c.velocity_map(q.segment(o.nq, d.nq), &scratch_N_[i]);
-      scatter_add(scratch_N_[i], slots_N_[i], 1.0, N);
+      c.velocity_map(*d.components[i], q.segment(o.nq, n.nq), &d.N[i]);
+      scatter_add(d.N[i], slots_N_[i], 1.0, N);
     }
   }
 }
@@ -440,41 +472,47 @@ bool Scene::project_positions(VectorRef q) const {
   return changed;
 }
 
-void Scene::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
-  if (components_.size() == 1) return components_[0]->mass_matrix(q, M);
-  Patterns& L = patterns();
+void Scene::mass_matrix(SystemData& data, const ConstVectorRef& q, SparseMatrix* M) const {
+  Data& d = static_cast<Data&>(data);
+  if (components_.size() == 1) return components_[0]->mass_matrix(*d.components[0], q, M);
+  const Patterns& L = patterns();
+  if (d.M.empty()) {
+    for (const auto& c : components_) d.M.push_back(c->mass_matrix_pattern());
+  }
   set_zero_keep_pattern(M);
   for (size_t i = 0; i < components_.size(); ++i) {
-    const Dimensions d = components_[i]->dimensions();
-    components_[i]->mass_matrix(q.segment(offsets_[i].nq, d.nq), &L.scratch_M[i]);
-    scatter_add(L.scratch_M[i], L.slots[i].M, 1.0, M);
+    const Dimensions n = components_[i]->dimensions();
+    components_[i]->mass_matrix(*d.components[i], q.segment(offsets_[i].nq, n.nq), &d.M[i]);
+    scatter_add(d.M[i], L.slots[i].M, 1.0, M);
   }
 }
 
-void Scene::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+void Scene::forces(SystemData& data, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                    const ConstVectorRef& z, VectorRef F) const {
+  Data& d = static_cast<Data&>(data);
   for (size_t i = 0; i < components_.size(); ++i) {
-    const Dimensions d = components_[i]->dimensions();
+    const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    components_[i]->forces(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv), z.segment(o.nz, d.nz),
-                           F.segment(o.nv, d.nv));
+    components_[i]->forces(*d.components[i], t, q.segment(o.nq, n.nq), v.segment(o.nv, n.nv),
+                           z.segment(o.nz, n.nz), F.segment(o.nv, n.nv));
   }
-  if (!attachments_.empty()) add_attachment_forces(t, q, v, 1.0, F);
+  if (!attachments_.empty()) add_attachment_forces(d, t, q, v, 1.0, F);
 }
 
-void Scene::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                              const ConstVectorRef& z, const ConstVectorRef& dv, double h,
-                              VectorRef r) const {
+void Scene::momentum_residual(SystemData& data, double t, const ConstVectorRef& q,
+                              const ConstVectorRef& v, const ConstVectorRef& z,
+                              const ConstVectorRef& dv, double h, VectorRef r) const {
+  Data& d = static_cast<Data&>(data);
   for (size_t i = 0; i < components_.size(); ++i) {
-    const Dimensions d = components_[i]->dimensions();
+    const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    components_[i]->momentum_residual(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                                      z.segment(o.nz, d.nz), dv.segment(o.nv, d.nv), h,
-                                      r.segment(o.nv, d.nv));
+    components_[i]->momentum_residual(*d.components[i], t, q.segment(o.nq, n.nq),
+                                      v.segment(o.nv, n.nv), z.segment(o.nz, n.nz),
+                                      dv.segment(o.nv, n.nv), h, r.segment(o.nv, n.nv));
   }
   if (attachments_.empty()) return;
   // r = M dv - h F: the attachments' forces enter with -h.
-  add_attachment_forces(t, q, v, -h, r);
+  add_attachment_forces(d, t, q, v, -h, r);
 }
 
 std::unique_ptr<StructuredNewtonMatrix> Scene::make_structured_newton_matrix() const {
@@ -482,50 +520,58 @@ std::unique_ptr<StructuredNewtonMatrix> Scene::make_structured_newton_matrix() c
   return components_[0]->make_structured_newton_matrix();
 }
 
-void Scene::misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                             const ConstVectorRef& z, VectorRef zdot) const {
+void Scene::misc_derivatives(SystemData& data, double t, const ConstVectorRef& q,
+                             const ConstVectorRef& v, const ConstVectorRef& z,
+                             VectorRef zdot) const {
   if (dims_.nz == 0) return;
+  Data& d = static_cast<Data&>(data);
   for (size_t i = 0; i < components_.size(); ++i) {
-    const Dimensions d = components_[i]->dimensions();
+    const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    components_[i]->misc_derivatives(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                                     z.segment(o.nz, d.nz), zdot.segment(o.nz, d.nz));
+    components_[i]->misc_derivatives(*d.components[i], t, q.segment(o.nq, n.nq),
+                                     v.segment(o.nv, n.nv), z.segment(o.nz, n.nz),
+                                     zdot.segment(o.nz, n.nz));
   }
 }
 
-void Scene::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                            const ConstVectorRef& z, const JacobianRequest& request,
-                            ForceJacobians* J) const {
-  gather_jacobians(t, q, v, z, request, J, &System::force_jacobians);
-  if (!attachments_.empty()) add_attachment_jacobians(t, q, v, request.complete, J);
+void Scene::force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
+                            const ConstVectorRef& v, const ConstVectorRef& z,
+                            const JacobianRequest& request, ForceJacobians* J) const {
+  Data& d = static_cast<Data&>(data);
+  gather_jacobians(d, t, q, v, z, request, J, &System::force_jacobians);
+  if (!attachments_.empty()) add_attachment_jacobians(d, t, q, v, request.complete, J);
 }
 
-void Scene::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                      const ConstVectorRef& z, const JacobianRequest& request,
-                                      ForceJacobians* J) const {
-  gather_jacobians(t, q, v, z, request, J, &System::automatic_force_jacobians);
-  if (!attachments_.empty()) add_attachment_jacobians(t, q, v, true, J);
+void Scene::automatic_force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
+                                      const ConstVectorRef& v, const ConstVectorRef& z,
+                                      const JacobianRequest& request, ForceJacobians* J) const {
+  Data& d = static_cast<Data&>(data);
+  gather_jacobians(d, t, q, v, z, request, J, &System::automatic_force_jacobians);
+  if (!attachments_.empty()) add_attachment_jacobians(d, t, q, v, true, J);
 }
 
-void Scene::gather_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+void Scene::gather_jacobians(Data& data, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                              const ConstVectorRef& z, const JacobianRequest& request,
                              ForceJacobians* J, JacobianMethod method) const {
   if (components_.size() == 1 && attachments_.empty()) {
-    return ((*components_[0]).*method)(t, q, v, z, request, J);
+    return ((*components_[0]).*method)(*data.components[0], t, q, v, z, request, J);
   }
   for (SparseMatrix* m : {&J->dF_dq, &J->dF_dv, &J->dF_dz, &J->dfz_dq, &J->dfz_dv, &J->dfz_dz}) {
     set_zero_keep_pattern(m);
   }
   J->approximated_terms = 0;
-  Patterns& L = patterns();
+  const Patterns& L = patterns();
+  if (data.J.empty()) {
+    for (const auto& c : components_) data.J.push_back(c->jacobian_pattern());
+  }
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions d = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
-    ForceJacobians& c = L.scratch_J[i];
+    ForceJacobians& c = data.J[i];
     JacobianRequest own = request;
     if (request.acceleration) own.acceleration = request.acceleration + o.nv;
-    ((*components_[i]).*method)(t, q.segment(o.nq, d.nq), v.segment(o.nv, d.nv),
-                                z.segment(o.nz, d.nz), own, &c);
+    ((*components_[i]).*method)(*data.components[i], t, q.segment(o.nq, d.nq),
+                                v.segment(o.nv, d.nv), z.segment(o.nz, d.nz), own, &c);
     const Slots& s = L.slots[i];
     scatter_add(c.dF_dq, s.dF_dq, 1.0, &J->dF_dq);
     scatter_add(c.dF_dv, s.dF_dv, 1.0, &J->dF_dv);
@@ -554,32 +600,32 @@ std::vector<int> Scene::jacobian_colouring_hint() const {
   return colour;
 }
 
-double Scene::energy(const State& s) const {
+double Scene::energy(SystemData& data, const State& s) const {
   if (!caps_.has_energy) return std::nan("");
+  Data& d = static_cast<Data&>(data);
   double e = 0.0;
   if (components_.size() == 1) {
     // One component's state is the scene's: no copy.
-    e = components_[0]->energy(s);
+    e = components_[0]->energy(*d.components[0], s);
   } else {
     // Energy is evaluated once or twice per step (the energy guard, the
-    // incremental potential): the components' states are scratch, never
-    // allocated here.
+    // incremental potential): the components' states are the data's.
     for (size_t i = 0; i < components_.size(); ++i) {
-      const Dimensions d = components_[i]->dimensions();
+      const Dimensions n = components_[i]->dimensions();
       const Dimensions& o = offsets_[i];
-      State& c = component_states_[i];
+      State& c = d.component_states[i];
       c.t = s.t;
-      c.x.segment(0, d.nq) = s.x.segment(o.nq, d.nq);
-      c.x.segment(d.nq, d.nv) = s.x.segment(dims_.nq + o.nv, d.nv);
-      c.x.segment(d.nq + d.nv, d.nz) = s.x.segment(dims_.nq + dims_.nv + o.nz, d.nz);
-      e += components_[i]->energy(c);
+      c.x.segment(0, n.nq) = s.x.segment(o.nq, n.nq);
+      c.x.segment(n.nq, n.nv) = s.x.segment(dims_.nq + o.nv, n.nv);
+      c.x.segment(n.nq + n.nv, n.nz) = s.x.segment(dims_.nq + dims_.nv + o.nz, n.nz);
+      e += components_[i]->energy(*d.components[i], c);
     }
   }
   if (!attachments_.empty()) {
     const ConstVectorRef q = s.x.head(dims_.nq), v = s.x.segment(dims_.nq, dims_.nv);
     for (int k = 0; k < static_cast<int>(attachments_.size()); ++k) {
-      attachment_points(k, s.t, q, v);
-      e += 0.5 * attachments_[k].k * (point_b_.p - point_a_.p).squaredNorm();
+      attachment_points(k, s.t, q, v, &d.point_a, &d.point_b);
+      e += 0.5 * attachments_[k].k * (d.point_b.p - d.point_a.p).squaredNorm();
     }
   }
   return e;

@@ -6,6 +6,8 @@
 
 namespace stiffsim {
 
+std::unique_ptr<SystemData> System::make_data() const { return std::make_unique<SystemData>(); }
+
 void System::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
                                   VectorRef qdot) const {
   (void)q;
@@ -18,25 +20,25 @@ const SparseMatrix& System::velocity_map_pattern() const {
                          "check capabilities().identity_velocity_map first");
 }
 
-void System::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
+void System::velocity_map(SystemData&, const ConstVectorRef& q, SparseMatrix* N) const {
   (void)q, (void)N;
   throw std::logic_error(name() +
                          ": velocity_map() is only defined for systems with N(q) != I; "
                          "check capabilities().identity_velocity_map first");
 }
 
-void System::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                             const ConstVectorRef& z, const JacobianRequest& request,
-                             ForceJacobians* J) const {
+void System::force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                             const ConstVectorRef& v, const ConstVectorRef& z,
+                             const JacobianRequest& request, ForceJacobians* J) const {
   (void)t, (void)q, (void)v, (void)z, (void)request, (void)J;
   throw std::logic_error(name() +
                          ": no analytic Jacobians; use a finite-difference scheme (forward or "
                          "central) or automatic");
 }
 
-void System::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                               const ConstVectorRef& z, const ConstVectorRef& dv, double h,
-                               VectorRef r) const {
+void System::momentum_residual(SystemData&, double t, const ConstVectorRef& q,
+                               const ConstVectorRef& v, const ConstVectorRef& z,
+                               const ConstVectorRef& dv, double h, VectorRef r) const {
   (void)t, (void)q, (void)v, (void)z, (void)dv, (void)h, (void)r;
   throw std::logic_error(name() + ": momentum_residual() is not implemented; check "
                                   "capabilities().momentum_residual first");
@@ -51,9 +53,9 @@ void System::point_kinematics(double, int, const Eigen::Vector3d&, const ConstVe
   throw std::logic_error(name() + ": has no points that attachments can act on");
 }
 
-void System::automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                       const ConstVectorRef& z, const JacobianRequest& request,
-                                       ForceJacobians* J) const {
+void System::automatic_force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                       const ConstVectorRef& v, const ConstVectorRef& z,
+                                       const JacobianRequest& request, ForceJacobians* J) const {
   (void)t, (void)q, (void)v, (void)z, (void)request, (void)J;
   throw std::logic_error(name() +
                          ": no automatic-differentiation Jacobians; use analytic (if available), "

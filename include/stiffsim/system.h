@@ -71,9 +71,28 @@ struct JacobianRequest {
   const double* acceleration = nullptr;
 };
 
+// The workspace of a System's evaluations: a System is an immutable model,
+// and everything an evaluation writes besides its outputs (the recursions'
+// workspaces, scratch matrices, a scene's components' own data) lives in a
+// SystemData that the system's make_data() creates. Whoever evaluates owns
+// one (every integrator and Jacobian evaluator does, per system), so
+// evaluations allocate nothing and one system serves several threads, each
+// with its own data. A data fits only the system that made it.
+class SystemData {
+ public:
+  virtual ~SystemData() = default;
+};
+
 class System {
  public:
   virtual ~System() = default;
+
+  // A workspace for this system's evaluations (see SystemData). The default
+  // holds nothing: a system whose evaluations need no scratch. Every
+  // evaluation below takes the caller's data first; the maps that need no
+  // scratch (q_dot = N v, projection, a point's kinematics into the
+  // caller's PointKinematics) take none.
+  virtual std::unique_ptr<SystemData> make_data() const;
 
   virtual Dimensions dimensions() const = 0;
   virtual Capabilities capabilities() const = 0;
@@ -94,7 +113,7 @@ class System {
   // Pattern of N (nq x nv), fixed.
   virtual const SparseMatrix& velocity_map_pattern() const;
   // Values of N(q) written into a matrix with velocity_map_pattern().
-  virtual void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const;
+  virtual void velocity_map(SystemData&, const ConstVectorRef& q, SparseMatrix* N) const;
   // Restores invariants of q after a step (unit quaternions). Returns true if
   // q changed.
   virtual bool project_positions(VectorRef q) const {
@@ -104,22 +123,23 @@ class System {
 
   // --- Mass matrix M(q), nv x nv, symmetric positive definite. ---
   virtual const SparseMatrix& mass_matrix_pattern() const = 0;
-  virtual void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const = 0;
+  virtual void mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const = 0;
 
   // --- Forces F (size nv) and f_z (size nz). ---
-  virtual void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  virtual void forces(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                       const ConstVectorRef& z, VectorRef F) const = 0;
-  virtual void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                const ConstVectorRef& z, VectorRef zdot) const {
+  virtual void misc_derivatives(SystemData&, double t, const ConstVectorRef& q,
+                                const ConstVectorRef& v, const ConstVectorRef& z,
+                                VectorRef zdot) const {
     (void)t, (void)q, (void)v, (void)z, (void)zdot;
   }
 
   // r = M(q) dv - h F(t, q, v, z), the momentum rows of a velocity-implicit
   // residual; only called when capabilities().momentum_residual (an
   // articulated tree: one inverse-dynamics pass, no mass matrix).
-  virtual void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                 const ConstVectorRef& z, const ConstVectorRef& dv, double h,
-                                 VectorRef r) const;
+  virtual void momentum_residual(SystemData&, double t, const ConstVectorRef& q,
+                                 const ConstVectorRef& v, const ConstVectorRef& z,
+                                 const ConstVectorRef& dv, double h, VectorRef r) const;
   // A Newton matrix this system factors by its own structure (see
   // structured_newton_matrix.h), or null when it has none.
   virtual std::unique_ptr<StructuredNewtonMatrix> make_structured_newton_matrix() const;
@@ -128,17 +148,17 @@ class System {
   // Matrices sized and structured as force_jacobians() fills them.
   virtual const ForceJacobians& jacobian_pattern() const = 0;
   // Analytic values; only called when capabilities().analytic_jacobians.
-  virtual void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                               const ConstVectorRef& z, const JacobianRequest& request,
-                               ForceJacobians* J) const;
+  virtual void force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                               const ConstVectorRef& v, const ConstVectorRef& z,
+                               const JacobianRequest& request, ForceJacobians* J) const;
   // The exact Jacobians of forces() and misc_derivatives() by forward-mode
   // automatic differentiation; only called when
   // capabilities().automatic_jacobians. The result is complete and exact by
   // construction (approximated_terms = 0): request.definite and
   // request.complete do not apply to it.
-  virtual void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                         const ConstVectorRef& z, const JacobianRequest& request,
-                                         ForceJacobians* J) const;
+  virtual void automatic_force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                         const ConstVectorRef& v, const ConstVectorRef& z,
+                                         const JacobianRequest& request, ForceJacobians* J) const;
 
   // A colouring of the columns of x = (q, v, z) for finite-difference
   // Jacobians that the system knows from its structure (a lattice), one
@@ -164,10 +184,45 @@ class System {
                                 PointKinematics* out) const;
 
   // Total energy (kinetic + potential) where defined, NaN otherwise.
-  virtual double energy(const State& s) const {
+  virtual double energy(SystemData&, const State& s) const {
     (void)s;
     return std::numeric_limits<double>::quiet_NaN();
   }
+
+  // --- The same evaluations on a workspace made for the one call. ---
+  // For tests, reports and one-off queries: each call allocates a data, so
+  // nothing that steps uses them. A derived class re-exports them with
+  // `using System::forces;` and the like.
+  void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
+    velocity_map(*make_data(), q, N);
+  }
+  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
+    mass_matrix(*make_data(), q, M);
+  }
+  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
+              VectorRef F) const {
+    forces(*make_data(), t, q, v, z, F);
+  }
+  void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                        const ConstVectorRef& z, VectorRef zdot) const {
+    misc_derivatives(*make_data(), t, q, v, z, zdot);
+  }
+  void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                         const ConstVectorRef& z, const ConstVectorRef& dv, double h,
+                         VectorRef r) const {
+    momentum_residual(*make_data(), t, q, v, z, dv, h, r);
+  }
+  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                       const ConstVectorRef& z, const JacobianRequest& request,
+                       ForceJacobians* J) const {
+    force_jacobians(*make_data(), t, q, v, z, request, J);
+  }
+  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                                 const ConstVectorRef& z, const JacobianRequest& request,
+                                 ForceJacobians* J) const {
+    automatic_force_jacobians(*make_data(), t, q, v, z, request, J);
+  }
+  double energy(const State& s) const { return energy(*make_data(), s); }
 };
 
 // Builds an empty ForceJacobians with the right sizes for `d` (all patterns

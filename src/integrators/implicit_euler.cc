@@ -87,7 +87,7 @@ void ImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x, double 
   // linearize.
   compute_force_jacobians_ahead(t, x, h);
   if (!caps_.identity_velocity_map) {
-    system_.velocity_map(linearization_.segment(0, dims_.nq), &N_);
+    system_.velocity_map(*data_, linearization_.segment(0, dims_.nq), &N_);
     ++stats_.velocity_map_evaluations;
   }
 }

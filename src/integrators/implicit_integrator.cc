@@ -610,7 +610,7 @@ double ImplicitIntegrator::guard_energy(const Eigen::VectorXd& x) {
   energy_state_.x = x;
   RememberedEnergy& slot = remembered_energy_[next_remembered_];
   next_remembered_ = 1 - next_remembered_;
-  slot.value = system_.energy(energy_state_);
+  slot.value = system_.energy(*data_, energy_state_);
   slot.x = x;
   return slot.value;
 }
@@ -622,7 +622,7 @@ double ImplicitIntegrator::negative_curvature(double t, const Eigen::VectorXd& q
   JacobianRequest exact;
   exact.complete = true;
   guard_v_.setZero(dims_.nv);
-  system_.force_jacobians(t, q, guard_v_, guard_z_, exact, &guard_jacobians_);
+  system_.force_jacobians(*data_, t, q, guard_v_, guard_z_, exact, &guard_jacobians_);
   return dq.dot(guard_jacobians_.dF_dq * dq);
 }
 
@@ -639,10 +639,10 @@ bool ImplicitIntegrator::incremental_hessian_definite(double t, double h,
   exact.complete = true;
   guard_q_ = x.segment(0, d.nq);
   guard_v_ = x.segment(d.nq, d.nv);
-  system_.force_jacobians(t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
+  system_.force_jacobians(*data_, t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
   const SparseMatrix D = guard_jacobians_.dF_dv;
   guard_v_.setZero();
-  system_.force_jacobians(t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
+  system_.force_jacobians(*data_, t, guard_q_, guard_v_, guard_z_, exact, &guard_jacobians_);
   const SparseMatrix H = mass_matrix_at(guard_q_) - h * D - (h * h) * guard_jacobians_.dF_dq;
   const SparseMatrix Ht = H.transpose();
   const SparseMatrix symmetric = 0.5 * (H + Ht);

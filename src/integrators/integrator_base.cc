@@ -41,6 +41,7 @@ constexpr const char* kUnstableExplicit =
 
 IntegratorBase::IntegratorBase(const System& system, IntegratorSettings settings)
     : system_(system),
+      data_(system.make_data()),
       settings_(settings),
       caps_(system.capabilities()),
       dims_(system.dimensions()) {
@@ -75,7 +76,7 @@ void IntegratorBase::initialize(const State& initial) {
   previous_ = initial;
   stats_ = IntegratorStatistics{};
   watch_energy_ = is_explicit() && settings_.fixed_step && caps_.passive && caps_.has_energy;
-  initial_energy_ = watch_energy_ ? system_.energy(initial) : 0.0;
+  initial_energy_ = watch_energy_ ? system_.energy(*data_, initial) : 0.0;
   candidate_.resize(dims_.nx());
   error_.resize(estimating_error() ? dims_.nx() : 0);
   // The pattern is taken on first use: a run on a structured Newton matrix
@@ -101,7 +102,7 @@ void IntegratorBase::check_energy_blow_up(double t, double h) {
   // times per step. The kinetic energy is only needed once the gain is large.
   energy_workspace_.t = t;
   energy_workspace_.x = candidate_;
-  const double e = system_.energy(energy_workspace_);
+  const double e = system_.energy(*data_, energy_workspace_);
   const double gain = e - initial_energy_;
   bool blown_up = !std::isfinite(e);
   if (!blown_up && gain > kEnergyBlowUp * std::max(std::abs(initial_energy_), kEnergyFloor)) {
@@ -306,7 +307,7 @@ const SparseMatrix& IntegratorBase::mass_matrix_at(const ConstVectorRef& q) {
   const auto start = WallClock::now();
   if (mass_matrix_.rows() == 0) mass_matrix_ = system_.mass_matrix_pattern();
   mass_q_ = q;
-  system_.mass_matrix(q, &mass_matrix_);
+  system_.mass_matrix(*data_, q, &mass_matrix_);
   stats_.assembly_seconds += seconds_since(start);
   ++stats_.mass_matrix_assemblies;
   mass_matrix_valid_ = true;
@@ -320,8 +321,8 @@ void IntegratorBase::evaluate_forces(double t, const Eigen::VectorXd& x, Eigen::
   const auto q = x.segment(0, dims_.nq);
   const auto v = x.segment(dims_.nq, dims_.nv);
   const auto z = x.segment(dims_.nq + dims_.nv, dims_.nz);
-  system_.forces(t, q, v, z, *F);
-  if (dims_.nz > 0) system_.misc_derivatives(t, q, v, z, *zdot);
+  system_.forces(*data_, t, q, v, z, *F);
+  if (dims_.nz > 0) system_.misc_derivatives(*data_, t, q, v, z, *zdot);
   ++stats_.derivative_evaluations;
   stats_.derivative_seconds += seconds_since(start);
 }

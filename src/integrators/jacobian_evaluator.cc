@@ -78,6 +78,7 @@ std::string list_schemes(const Capabilities& caps, bool analytic, bool automatic
 
 JacobianEvaluator::JacobianEvaluator(const System& system, JacobianScheme scheme)
     : system_(system),
+      data_(system.make_data()),
       scheme_(scheme),
       dims_(system.dimensions()),
       differences_(scheme == JacobianScheme::kForward || scheme == JacobianScheme::kCentral) {
@@ -189,14 +190,14 @@ void JacobianEvaluator::evaluate_rates(double t, const Eigen::VectorXd& x,
   const auto q = x.segment(0, dims_.nq);
   const auto v = x.segment(dims_.nq, dims_.nv);
   const auto z = x.segment(dims_.nq + dims_.nv, dims_.nz);
-  system_.forces(t, q, v, z, f->head(dims_.nv));
+  system_.forces(*data_, t, q, v, z, f->head(dims_.nv));
   if (acceleration_) {
     // F - M(q) a (JacobianRequest::acceleration).
-    system_.mass_matrix(q, &mass_);
+    system_.mass_matrix(*data_, q, &mass_);
     f->head(dims_.nv).noalias() -=
         mass_ * Eigen::Map<const Eigen::VectorXd>(acceleration_, dims_.nv);
   }
-  if (dims_.nz > 0) system_.misc_derivatives(t, q, v, z, f->tail(dims_.nz));
+  if (dims_.nz > 0) system_.misc_derivatives(*data_, t, q, v, z, f->tail(dims_.nz));
 }
 
 void JacobianEvaluator::store_columns(int colour, const Eigen::VectorXd& f_plus,
@@ -268,12 +269,12 @@ int JacobianEvaluator::evaluate(double t, const Eigen::VectorXd& x, const Jacobi
 
   switch (scheme_) {
     case JacobianScheme::kAnalytic:
-      system_.force_jacobians(t, q, v, z, request, J);
+      system_.force_jacobians(*data_, t, q, v, z, request, J);
       return 0;
     case JacobianScheme::kAutomatic:
       // Not counted: the dual-number pass costs about one evaluation of F
       // carried with derivative lanes, never one per colour.
-      system_.automatic_force_jacobians(t, q, v, z, request, J);
+      system_.automatic_force_jacobians(*data_, t, q, v, z, request, J);
       return 0;
     case JacobianScheme::kForward:
     case JacobianScheme::kCentral:

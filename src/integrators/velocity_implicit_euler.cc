@@ -151,7 +151,7 @@ void VelocityImplicitEuler::compute_jacobian(double t, const Eigen::VectorXd& x,
   const Dimensions& d = dims_;
   compute_force_jacobians_ahead(t, x, h);
   if (!caps_.identity_velocity_map) {
-    system_.velocity_map(x.segment(0, d.nq), &N_);  // N(q_n): lagged, as the seed says
+    system_.velocity_map(*data_, x.segment(0, d.nq), &N_);  // N(q_n): lagged, as the seed says
     ++stats_.velocity_map_evaluations;
     // The products K N and dfz/dq N into their structural patterns, so
     // their slots in the iteration matrix stay valid and nothing is
@@ -184,8 +184,8 @@ void VelocityImplicitEuler::residual(double t, double h, const Eigen::VectorXd& 
     const auto q = residual_state_.segment(0, d.nq);
     const auto z = residual_state_.segment(d.nq + d.nv, d.nz);
     dv_ = v - v0;
-    system_.momentum_residual(t, q, v, z, dv_, h, r->segment(0, d.nv));
-    if (d.nz > 0) system_.misc_derivatives(t, q, v, z, zdot_);
+    system_.momentum_residual(*data_, t, q, v, z, dv_, h, r->segment(0, d.nv));
+    if (d.nz > 0) system_.misc_derivatives(*data_, t, q, v, z, zdot_);
     ++stats_.derivative_evaluations;
     stats_.derivative_seconds += seconds_since(start);
     r->segment(d.nv, d.nz) = x.segment(d.nq + d.nv, d.nz) - x0.segment(d.nq + d.nv, d.nz) - h * zdot_;
@@ -287,7 +287,7 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
   energy_state_.t = t;
   energy_state_.x.segment(0, d.nq) = x.segment(0, d.nq);
   energy_state_.x.segment(d.nq, d.nv).setZero();
-  const double potential = system_.energy(energy_state_);
+  const double potential = system_.energy(*data_, energy_state_);
   const auto v = x.segment(d.nq, d.nv);
   dv_ = v - x0.segment(d.nq, d.nv);
   const double* m = mass_diagonal_;
@@ -299,7 +299,7 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
 
 void VelocityImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {
   (void)t0, (void)h;
-  if (use_potential_merit_) g_scale_ = std::abs(system_.energy(state_));
+  if (use_potential_merit_) g_scale_ = std::abs(system_.energy(*data_, state_));
   mass_diagonal_ =
       caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, dims_.nq)).valuePtr() : nullptr;
 }
@@ -325,7 +325,7 @@ double VelocityImplicitEuler::potential_roundoff(double g) const {
 void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x) {
   const auto start = WallClock::now();
   const Dimensions& d = dims_;
-  system_.force_jacobians(t, x.segment(0, d.nq), x.segment(d.nq, d.nv),
+  system_.force_jacobians(*data_, t, x.segment(0, d.nq), x.segment(d.nq, d.nv),
                           x.segment(d.nq + d.nv, d.nz), JacobianRequest{}, &merit_jacobians_);
   ++stats_.merit_damping_evaluations;
   stats_.jacobian_seconds += seconds_since(start);

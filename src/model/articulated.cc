@@ -37,14 +37,32 @@ bool is_free_root(const TreeBody& b) {
          b.placement.isApprox(Eigen::Isometry3d::Identity(), 0.0);
 }
 
-}  // namespace
-
-struct ArticulatedSystem::DualWorkspace {
+// The dual numbers' workspace of the automatic differentiation.
+struct DualWorkspace {
   explicit DualWorkspace(const ArticulatedModel& model)
       : q(model.nq), v(model.nv), data(model) {}
   VecX<Dual> q, v;
   ArticulatedData<Dual> data;
 };
+
+}  // namespace
+
+struct ArticulatedSystem::Data : SystemData {
+  explicit Data(const ArticulatedModel& model)
+      : inverse_dynamics(model), acceleration(model.nv), crba(model) {}
+  ArticulatedData<double> inverse_dynamics;
+  Eigen::VectorXd acceleration;  // momentum_residual()'s dv / h
+  CompositeRigidBodyData crba;
+  // Made on their first use: a run needs one kind of Jacobian at most, and
+  // a run on the articulated-body recursion none.
+  std::unique_ptr<DualWorkspace> dual;
+  std::unique_ptr<RneaDerivatives> derivatives;
+  std::unique_ptr<BushingDerivatives> bushing_derivatives;
+};
+
+std::unique_ptr<SystemData> ArticulatedSystem::make_data() const {
+  return std::make_unique<Data>(model_);
+}
 
 ArticulatedSystem::~ArticulatedSystem() = default;
 
@@ -192,9 +210,6 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     model_.stiffness[i] = combined_joint_forces_[i].stiffness;
     model_.rest[i] = combined_joint_forces_[i].rest;
   }
-  data_ = std::make_unique<ArticulatedData<double>>(model_);
-  acceleration_.resize(dims_.nv);
-  crba_ = std::make_unique<CompositeRigidBodyData>(model_);
 
   PatternBuilder Np(dims_.nq, dims_.nv);
   for (int i = 0; i < nb; ++i) {
@@ -357,7 +372,7 @@ void ArticulatedSystem::map_velocity_to_qdot(const ConstVectorRef& q, const Cons
   }
 }
 
-void ArticulatedSystem::velocity_map(const ConstVectorRef& q, SparseMatrix* N) const {
+void ArticulatedSystem::velocity_map(SystemData&, const ConstVectorRef& q, SparseMatrix* N) const {
   // Column-major storage: fill column by column in the pattern's own order.
   for (int i = 0; i < static_cast<int>(model_.tree.bodies.size()); ++i) {
     const int qo = model_.q_offset[i], vo = model_.v_offset[i];
@@ -386,8 +401,9 @@ bool ArticulatedSystem::project_positions(VectorRef q) const {
   return changed;
 }
 
-void ArticulatedSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
-  composite_rigid_body(model_, q, patterns().mass_slots, crba_.get(), M);
+void ArticulatedSystem::mass_matrix(SystemData& data, const ConstVectorRef& q,
+                                    SparseMatrix* M) const {
+  composite_rigid_body(model_, q, patterns().mass_slots, &static_cast<Data&>(data).crba, M);
 }
 
 template <typename T, typename Positions, typename Velocities>
@@ -401,11 +417,13 @@ void ArticulatedSystem::generalized_forces(double t, const Positions& q, const V
   }
 }
 
-void ArticulatedSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                               const ConstVectorRef& z, VectorRef F) const {
+void ArticulatedSystem::forces(SystemData& data, double t, const ConstVectorRef& q,
+                               const ConstVectorRef& v, const ConstVectorRef& z,
+                               VectorRef F) const {
   (void)z;
-  generalized_forces<double>(t, q, v, nullptr, data_.get());
-  F = data_->F;
+  ArticulatedData<double>& id = static_cast<Data&>(data).inverse_dynamics;
+  generalized_forces<double>(t, q, v, nullptr, &id);
+  F = id.F;
   add_drive_torques(t, F);
 }
 
@@ -415,15 +433,16 @@ void ArticulatedSystem::add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> 
   }
 }
 
-void ArticulatedSystem::momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                          const ConstVectorRef& z, const ConstVectorRef& dv,
-                                          double h, VectorRef r) const {
+void ArticulatedSystem::momentum_residual(SystemData& data, double t, const ConstVectorRef& q,
+                                          const ConstVectorRef& v, const ConstVectorRef& z,
+                                          const ConstVectorRef& dv, double h, VectorRef r) const {
   // F - M(q) a at a = dv / h is -(M dv - h F) / h.
   (void)z;
-  acceleration_ = dv / h;
-  generalized_forces<double>(t, q, v, acceleration_.data(), data_.get());
-  add_drive_torques(t, data_->F);
-  r = -h * data_->F;
+  Data& d = static_cast<Data&>(data);
+  d.acceleration = dv / h;
+  generalized_forces<double>(t, q, v, d.acceleration.data(), &d.inverse_dynamics);
+  add_drive_torques(t, d.inverse_dynamics.F);
+  r = -h * d.inverse_dynamics.F;
 }
 
 std::unique_ptr<StructuredNewtonMatrix> ArticulatedSystem::make_structured_newton_matrix() const {
@@ -433,16 +452,17 @@ std::unique_ptr<StructuredNewtonMatrix> ArticulatedSystem::make_structured_newto
   return std::make_unique<ArticulatedBodySolver>(model_);
 }
 
-void ArticulatedSystem::exact_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                        const double* acceleration, ForceJacobians* J) const {
+void ArticulatedSystem::exact_jacobians(Data& workspace, double t, const ConstVectorRef& q,
+                                        const ConstVectorRef& v, const double* acceleration,
+                                        ForceJacobians* J) const {
   // Seeded forward mode: the columns of one colour share no row of [K D], so
   // they can share a derivative lane; each pass carries kLanes colours.
   const int nq = dims_.nq, nv = dims_.nv;
   const Patterns& P = patterns();
-  if (!dual_) dual_ = std::make_unique<DualWorkspace>(model_);
-  VecX<Dual>& qd = dual_->q;
-  VecX<Dual>& vd = dual_->v;
-  ArticulatedData<Dual>& data = dual_->data;
+  if (!workspace.dual) workspace.dual = std::make_unique<DualWorkspace>(model_);
+  VecX<Dual>& qd = workspace.dual->q;
+  VecX<Dual>& vd = workspace.dual->v;
+  ArticulatedData<Dual>& data = workspace.dual->data;
   const VecX<Dual>& Fd = data.F;
   SparseMatrix& K = J->dF_dq;
   SparseMatrix& D = J->dF_dv;
@@ -472,19 +492,21 @@ void ArticulatedSystem::exact_jacobians(double t, const ConstVectorRef& q, const
   J->approximated_terms = 0;
 }
 
-void ArticulatedSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                        const ConstVectorRef& z, const JacobianRequest& request,
-                                        ForceJacobians* J) const {
+void ArticulatedSystem::force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
+                                        const ConstVectorRef& v, const ConstVectorRef& z,
+                                        const JacobianRequest& request, ForceJacobians* J) const {
   (void)z;
+  Data& d = static_cast<Data&>(data);
   if (!options_.bushings.empty()) {
-    if (!bushing_derivatives_) bushing_derivatives_ = std::make_unique<BushingDerivatives>(*this);
-    bushing_derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+    if (!d.bushing_derivatives) d.bushing_derivatives = std::make_unique<BushingDerivatives>(*this);
+    d.bushing_derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
     J->approximated_terms = 0;
     return;
   }
-  if (!derivatives_) derivatives_ = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
+  if (!d.derivatives)
+    d.derivatives = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
   const Vec6<double> world_acceleration = world_acceleration_at(t);
-  derivatives_->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv, &world_acceleration);
+  d.derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv, &world_acceleration);
   J->approximated_terms = 0;
 }
 
@@ -513,12 +535,13 @@ Eigen::Vector3d ArticulatedSystem::root_velocity(double t) const {
   return d;
 }
 
-void ArticulatedSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
-                                                  const ConstVectorRef& v, const ConstVectorRef& z,
+void ArticulatedSystem::automatic_force_jacobians(SystemData& data, double t,
+                                                  const ConstVectorRef& q, const ConstVectorRef& v,
+                                                  const ConstVectorRef& z,
                                                   const JacobianRequest& request,
                                                   ForceJacobians* J) const {
   (void)z;
-  exact_jacobians(t, q, v, request.acceleration, J);
+  exact_jacobians(static_cast<Data&>(data), t, q, v, request.acceleration, J);
 }
 
 std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {
@@ -552,7 +575,7 @@ double ArticulatedSystem::kinetic_energy(const Eigen::VectorXd& q, const Eigen::
   return e;
 }
 
-double ArticulatedSystem::energy(const State& s) const {
+double ArticulatedSystem::energy(SystemData&, const State& s) const {
   const Eigen::VectorXd q = s.q(dims_), v = s.v(dims_);
   double e = kinetic_energy(q, v);
   const std::vector<Pose<double>> world = world_poses(q);

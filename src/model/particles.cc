@@ -242,7 +242,7 @@ std::vector<std::string> ParticleSystem::velocity_names() const { return positio
 
 const SparseMatrix& ParticleSystem::mass_matrix_pattern() const { return mass_pattern_; }
 
-void ParticleSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
+void ParticleSystem::mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const {
   (void)q;
   if (M->rows() != free_mass_.size() || M->nonZeros() != free_mass_.size()) {
     throw std::logic_error(name() + ": mass_matrix() needs a matrix with mass_matrix_pattern()");
@@ -290,7 +290,7 @@ void ParticleSystem::point_kinematics(double t, int node, const Eigen::Vector3d&
   }
 }
 
-void ParticleSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+void ParticleSystem::forces(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                             const ConstVectorRef& z, VectorRef F) const {
   (void)z;
   const double alpha = desc_.drag;
@@ -323,9 +323,9 @@ void ParticleSystem::check_jacobian_pattern(const ForceJacobians& J, const char*
   }
 }
 
-void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                     const ConstVectorRef& z, const JacobianRequest& request,
-                                     ForceJacobians* J) const {
+void ParticleSystem::force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                     const ConstVectorRef& v, const ConstVectorRef& z,
+                                     const JacobianRequest& request, ForceJacobians* J) const {
   (void)z;
   check_jacobian_pattern(*J, "force_jacobians");
   set_zero_keep_pattern(&J->dF_dq);
@@ -359,7 +359,7 @@ void ParticleSystem::force_jacobians(double t, const ConstVectorRef& q, const Co
   J->approximated_terms = approximated;
 }
 
-void ParticleSystem::automatic_force_jacobians(double t, const ConstVectorRef& q,
+void ParticleSystem::automatic_force_jacobians(SystemData&, double t, const ConstVectorRef& q,
                                                const ConstVectorRef& v, const ConstVectorRef& z,
                                                const JacobianRequest& request,
                                                ForceJacobians* J) const {
@@ -437,7 +437,7 @@ std::vector<int> ParticleSystem::jacobian_colouring_hint() const {
   return colour;
 }
 
-double ParticleSystem::energy(const State& s) const {
+double ParticleSystem::energy(SystemData&, const State& s) const {
   const Dimensions dims = dimensions();
   const ConstVectorRef q = s.q(dims);
   const auto v = s.v(dims);

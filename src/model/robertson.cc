@@ -45,17 +45,18 @@ Capabilities RobertsonSystem::capabilities() const {
 
 State RobertsonSystem::initial_state() const { return State(0.0, Eigen::Vector3d(1.0, 0.0, 0.0)); }
 
-void RobertsonSystem::mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const {
+void RobertsonSystem::mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const {
   (void)q, (void)M;
 }
 
-void RobertsonSystem::forces(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                             const ConstVectorRef& z, VectorRef F) const {
+void RobertsonSystem::forces(SystemData&, double t, const ConstVectorRef& q,
+                             const ConstVectorRef& v, const ConstVectorRef& z, VectorRef F) const {
   (void)t, (void)q, (void)v, (void)z, (void)F;
 }
 
-void RobertsonSystem::misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                       const ConstVectorRef& z, VectorRef zdot) const {
+void RobertsonSystem::misc_derivatives(SystemData&, double t, const ConstVectorRef& q,
+                                       const ConstVectorRef& v, const ConstVectorRef& z,
+                                       VectorRef zdot) const {
   (void)t, (void)q, (void)v;
   const double y1 = z[0], y2 = z[1], y3 = z[2];
   // Each reaction's rate is added to one species and taken from another, so
@@ -66,9 +67,9 @@ void RobertsonSystem::misc_derivatives(double t, const ConstVectorRef& q, const 
   zdot[2] = r2;
 }
 
-void RobertsonSystem::force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                      const ConstVectorRef& z, const JacobianRequest& request,
-                                      ForceJacobians* J) const {
+void RobertsonSystem::force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                      const ConstVectorRef& v, const ConstVectorRef& z,
+                                      const JacobianRequest& request, ForceJacobians* J) const {
   (void)t, (void)q, (void)v, (void)request;
   if (J->dfz_dz.rows() != 3 || J->dfz_dz.cols() != 3 || J->dfz_dz.nonZeros() != 9) {
     throw std::logic_error(name() + ": force_jacobians() needs matrices with jacobian_pattern()");

@@ -83,7 +83,10 @@ void check_flag(int flag, const char* what) {
 class Problem {
  public:
   Problem(const System& system, bool sparse_jacobian)
-      : system_(system), d_(system.dimensions()), caps_(system.capabilities()),
+      : system_(system),
+        data_(system.make_data()),
+        d_(system.dimensions()),
+        caps_(system.capabilities()),
         sparse_(sparse_jacobian) {
     F_.resize(d_.nv);
     if (d_.nv > 0) {
@@ -92,7 +95,7 @@ class Problem {
       if (caps_.constant_mass_matrix) {
         // Constant: assembled and factored once (q does not matter).
         const Eigen::VectorXd q0 = Eigen::VectorXd::Zero(d_.nq);
-        system_.mass_matrix(q0, &M_);
+        system_.mass_matrix(*data_, q0, &M_);
         prepare_mass();
         mass_ready_ = true;
       }
@@ -121,9 +124,9 @@ class Problem {
         system_.map_velocity_to_qdot(q, v, Xdot.segment(0, nq));
       }
       if (nv > 0) {
-        system_.forces(t, q, v, z, F_);
+        system_.forces(*data_, t, q, v, z, F_);
         if (!caps_.constant_mass_matrix || !mass_ready_) {
-          system_.mass_matrix(q, &M_);
+          system_.mass_matrix(*data_, q, &M_);
           prepare_mass();
         }
         auto vdot = Xdot.segment(nq, nv);
@@ -135,7 +138,7 @@ class Problem {
           vdot = sparse_llt_.solve(F_);
         }
       }
-      if (nz > 0) system_.misc_derivatives(t, q, v, z, Xdot.segment(nq + nv, nz));
+      if (nz > 0) system_.misc_derivatives(*data_, t, q, v, z, Xdot.segment(nq + nv, nz));
       return Xdot.allFinite() ? 0 : 1;
     } catch (const std::exception& e) {
       remember(std::current_exception(), e.what());
@@ -158,7 +161,7 @@ class Problem {
       JacobianRequest request;
       request.definite = false;
       request.complete = true;
-      system_.force_jacobians(t, q, v, z, request, &fj_);
+      system_.force_jacobians(*data_, t, q, v, z, request, &fj_);
 
       set_zero_keep_pattern(&Jx_);
       double* values = Jx_.valuePtr();
@@ -254,6 +257,7 @@ class Problem {
   }
 
   const System& system_;
+  const std::unique_ptr<SystemData> data_;
   const Dimensions d_;
   const Capabilities caps_;
   const bool sparse_;

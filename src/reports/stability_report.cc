@@ -215,13 +215,14 @@ int run_stability_report(const ReportOptions& options) {
           o.wall = r.wall_seconds;
           o.message = r.message;
           // Energy of MuJoCo's states in stiffsim's model of the same chain.
-          const double e0 = s.scene->energy(s.scene->initial_state());
+          const std::unique_ptr<SystemData> data = s.scene->make_data();
+          const double e0 = s.scene->energy(*data, s.scene->initial_state());
           double emax = e0;
           bool finite = true;
           for (const Eigen::VectorXd& x : r.samples) {
             finite &= x.allFinite();
             if (!x.allFinite()) break;
-            emax = std::max(emax, s.scene->energy(State(0.0, x)));
+            emax = std::max(emax, s.scene->energy(*data, State(0.0, x)));
           }
           o.energy_ratio = (emax - e0) / std::max(std::abs(e0), 1e-12);  // e0 != 0: the chain starts raised
           if (!finite) {

@@ -50,10 +50,10 @@ class ScalarOde : public System {
   std::vector<std::string> velocity_names() const override { return {}; }
   std::vector<std::string> misc_names() const override { return {"z"}; }
   const SparseMatrix& mass_matrix_pattern() const override { return mass_; }
-  void mass_matrix(const ConstVectorRef&, SparseMatrix*) const override {}
-  void forces(double, const ConstVectorRef&, const ConstVectorRef&, const ConstVectorRef&,
-              VectorRef) const override {}
-  void misc_derivatives(double t, const ConstVectorRef&, const ConstVectorRef&,
+  void mass_matrix(SystemData&, const ConstVectorRef&, SparseMatrix*) const override {}
+  void forces(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
+              const ConstVectorRef&, VectorRef) const override {}
+  void misc_derivatives(SystemData&, double t, const ConstVectorRef&, const ConstVectorRef&,
                         const ConstVectorRef& z, VectorRef zdot) const override {
     zdot[0] = f_(t, z[0]);
   }

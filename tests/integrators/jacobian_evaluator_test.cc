@@ -375,17 +375,17 @@ class Robertson : public System {
   std::vector<std::string> position_names() const override { return {}; }
   std::vector<std::string> velocity_names() const override { return {}; }
   const SparseMatrix& mass_matrix_pattern() const override { return mass_; }
-  void mass_matrix(const ConstVectorRef&, SparseMatrix*) const override {}
-  void forces(double, const ConstVectorRef&, const ConstVectorRef&, const ConstVectorRef&,
-              VectorRef) const override {}
-  void misc_derivatives(double, const ConstVectorRef&, const ConstVectorRef&,
+  void mass_matrix(SystemData&, const ConstVectorRef&, SparseMatrix*) const override {}
+  void forces(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
+              const ConstVectorRef&, VectorRef) const override {}
+  void misc_derivatives(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
                         const ConstVectorRef& y, VectorRef ydot) const override {
     ydot[0] = -0.04 * y[0] + 1e4 * y[1] * y[2];
     ydot[2] = 3e7 * y[1] * y[1];
     ydot[1] = -ydot[0] - ydot[2];
   }
   const ForceJacobians& jacobian_pattern() const override { return pattern_; }
-  void force_jacobians(double, const ConstVectorRef&, const ConstVectorRef&,
+  void force_jacobians(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
                        const ConstVectorRef& y, const JacobianRequest&,
                        ForceJacobians* J) const override {
     Eigen::Matrix3d A;
@@ -445,20 +445,20 @@ class Coupled : public System {
   std::vector<std::string> position_names() const override { return {"a", "b"}; }
   std::vector<std::string> velocity_names() const override { return {"a", "b"}; }
   const SparseMatrix& mass_matrix_pattern() const override { return mass_; }
-  void mass_matrix(const ConstVectorRef&, SparseMatrix* M) const override {
+  void mass_matrix(SystemData&, const ConstVectorRef&, SparseMatrix* M) const override {
     std::fill(M->valuePtr(), M->valuePtr() + 2, 1.0);
   }
-  void forces(double, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
-              VectorRef F) const override {
+  void forces(SystemData&, double, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override {
     F[0] = -kK * q[0] + std::sin(q[1]) * z[0];
     F[1] = -kC * v[1] + q[0] * v[0];
   }
-  void misc_derivatives(double, const ConstVectorRef& q, const ConstVectorRef& v,
+  void misc_derivatives(SystemData&, double, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, VectorRef zdot) const override {
     zdot[0] = -z[0] * z[0] * z[0] + q[1] * v[0];
   }
   const ForceJacobians& jacobian_pattern() const override { return pattern_; }
-  void force_jacobians(double, const ConstVectorRef& q, const ConstVectorRef& v,
+  void force_jacobians(SystemData&, double, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest&,
                        ForceJacobians* J) const override {
     J->dF_dq.coeffRef(0, 0) = -kK;

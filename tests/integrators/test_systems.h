@@ -114,15 +114,15 @@ class LinearTestSystem : public System {
   std::vector<std::string> velocity_names() const override { return {}; }
   std::vector<std::string> misc_names() const override { return {"y"}; }
   const SparseMatrix& mass_matrix_pattern() const override { return mass_; }
-  void mass_matrix(const ConstVectorRef&, SparseMatrix*) const override {}
-  void forces(double, const ConstVectorRef&, const ConstVectorRef&, const ConstVectorRef&,
-              VectorRef) const override {}
-  void misc_derivatives(double, const ConstVectorRef&, const ConstVectorRef&,
+  void mass_matrix(SystemData&, const ConstVectorRef&, SparseMatrix*) const override {}
+  void forces(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
+              const ConstVectorRef&, VectorRef) const override {}
+  void misc_derivatives(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
                         const ConstVectorRef& z, VectorRef zdot) const override {
     zdot = lambda_ * z;
   }
   const ForceJacobians& jacobian_pattern() const override { return pattern_; }
-  void force_jacobians(double, const ConstVectorRef&, const ConstVectorRef&,
+  void force_jacobians(SystemData&, double, const ConstVectorRef&, const ConstVectorRef&,
                        const ConstVectorRef&, const JacobianRequest&,
                        ForceJacobians* J) const override {
     J->dfz_dz.valuePtr()[0] = lambda_;

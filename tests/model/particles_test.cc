@@ -456,13 +456,14 @@ TEST(ParticleSystem, ForcesAndJacobiansDoNotAllocate) {
   ForceJacobians J = sys.jacobian_pattern();
   SparseMatrix M = sys.mass_matrix_pattern();
   const JacobianRequest request{true};
+  const std::unique_ptr<SystemData> data = sys.make_data();
   g_allocations = 0;
   g_count_allocations = true;
-  sys.forces(0.0, s.q(d), s.v(d), s.z(d), F);
-  sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), request, &J);
-  sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), JacobianRequest{false, true}, &J);
-  sys.automatic_force_jacobians(0.0, s.q(d), s.v(d), s.z(d), request, &J);
-  sys.mass_matrix(s.q(d), &M);
+  sys.forces(*data, 0.0, s.q(d), s.v(d), s.z(d), F);
+  sys.force_jacobians(*data, 0.0, s.q(d), s.v(d), s.z(d), request, &J);
+  sys.force_jacobians(*data, 0.0, s.q(d), s.v(d), s.z(d), JacobianRequest{false, true}, &J);
+  sys.automatic_force_jacobians(*data, 0.0, s.q(d), s.v(d), s.z(d), request, &J);
+  sys.mass_matrix(*data, s.q(d), &M);
   g_count_allocations = false;
   EXPECT_EQ(g_allocations.load(), 0);
 

@@ -148,10 +148,11 @@ TEST(CvodePeer, RejectsBadSampleTimes) {
 class ExplodingSpring : public LinearTestSystem {
  public:
   ExplodingSpring() : LinearTestSystem(-1.0) {}
-  void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                        const ConstVectorRef& z, VectorRef zdot) const override {
+  void misc_derivatives(SystemData& data, double t, const ConstVectorRef& q,
+                        const ConstVectorRef& v, const ConstVectorRef& z,
+                        VectorRef zdot) const override {
     if (t > 0.05) throw std::runtime_error("exploded");
-    LinearTestSystem::misc_derivatives(t, q, v, z, zdot);
+    LinearTestSystem::misc_derivatives(data, t, q, v, z, zdot);
   }
 };
 

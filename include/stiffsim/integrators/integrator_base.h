@@ -113,6 +113,8 @@ class IntegratorBase {
                          Eigen::VectorXd* a);
 
   const System& system_;
+  // The workspace of every evaluation of system_ (system.h: SystemData).
+  const std::unique_ptr<SystemData> data_;
   const IntegratorSettings settings_;
   const Capabilities caps_;
   const Dimensions dims_;

@@ -68,6 +68,7 @@ class JacobianEvaluator {
   bool prepared_ = false;
 
   const System& system_;
+  const std::unique_ptr<SystemData> data_;  // the evaluations' workspace
   const JacobianScheme scheme_;
   const Dimensions dims_;
   const bool differences_;  // forward or central

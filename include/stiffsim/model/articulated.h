@@ -37,10 +37,6 @@
 
 namespace stiffsim {
 
-class BushingDerivatives;
-struct CompositeRigidBodyData;
-class RneaDerivatives;
-
 // A PD drive on a 1-DOF joint of the exact formulation:
 //   tau = kp (p(t) - q) + kd (p'(t) - q_dot),
 // p the target path (path.h), its rate the velocity target. Its stiffness
@@ -79,20 +75,32 @@ struct ArticulatedOptions {
   std::string formulation = "exact";  // for the name in reports: exact | compliant
 };
 
-// The model (ArticulatedModel) is immutable; every evaluation writes into one
-// workspace (ArticulatedData) created with the system, so evaluations
-// allocate nothing and a system serves one thread at a time. The matrix
-// patterns (dense for a long chain) are built on first use: a run on the
-// articulated-body recursion never needs them.
+// The model (ArticulatedModel) is immutable; every evaluation writes into the
+// caller's workspace (make_data(): the inverse dynamics', the composite
+// rigid body algorithm's, and, made on their first use, the derivatives'
+// and the dual numbers'), so evaluations allocate nothing after the first
+// and one system serves any number of threads, each with its own data. The
+// matrix patterns (dense for a long chain) are built on first use: a run on
+// the articulated-body recursion never needs them.
 class ArticulatedSystem : public System {
  public:
   // Validates the tree and options; throws InputError naming the component.
   ArticulatedSystem(RigidTree tree, ArticulatedOptions options);
   ~ArticulatedSystem() override;
 
+  // The overloads without a workspace (system.h).
+  using System::automatic_force_jacobians;
+  using System::energy;
+  using System::force_jacobians;
+  using System::forces;
+  using System::mass_matrix;
+  using System::momentum_residual;
+  using System::velocity_map;
+
   Dimensions dimensions() const override { return dims_; }
   Capabilities capabilities() const override;
   std::string name() const override { return model_.tree.name; }
+  std::unique_ptr<SystemData> make_data() const override;
   State initial_state() const override;
   std::vector<std::string> position_names() const override;
   std::vector<std::string> velocity_names() const override;
@@ -100,15 +108,15 @@ class ArticulatedSystem : public System {
   void map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& v,
                             VectorRef qdot) const override;
   const SparseMatrix& velocity_map_pattern() const override { return velocity_map_pattern_; }
-  void velocity_map(const ConstVectorRef& q, SparseMatrix* N) const override;
+  void velocity_map(SystemData&, const ConstVectorRef& q, SparseMatrix* N) const override;
   bool project_positions(VectorRef q) const override;
 
   const SparseMatrix& mass_matrix_pattern() const override { return patterns().mass; }
-  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
-  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
-              VectorRef F) const override;
+  void mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override;
   // M(q) dv - h F by one inverse-dynamics pass at the acceleration dv / h.
-  void momentum_residual(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void momentum_residual(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                          const ConstVectorRef& z, const ConstVectorRef& dv, double h,
                          VectorRef r) const override;
   // Exact trees (no bushings): the articulated-body recursion.
@@ -120,13 +128,13 @@ class ArticulatedSystem : public System {
   // theirs and the free bodies' (bushing_derivatives.h), O(n).
   // automatic_force_jacobians differentiates the same F by seeded forward
   // mode and checks both.
-  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void force_jacobians(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
-  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                 const ConstVectorRef& z, const JacobianRequest& request,
-                                 ForceJacobians* J) const override;
-  double energy(const State& s) const override;
+  void automatic_force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                 const ConstVectorRef& v, const ConstVectorRef& z,
+                                 const JacobianRequest& request, ForceJacobians* J) const override;
+  double energy(SystemData&, const State& s) const override;
   // Bodies are points attachments can act on (a point fixed in the body's
   // frame), whatever their joints (point_kinematics.h: a planar joint moves
   // a point as two translations and a turn, a floating joint as three
@@ -173,11 +181,13 @@ class ArticulatedSystem : public System {
   int jacobian_passes() const { return patterns().jacobian_passes; }
 
  private:
+  // The workspace make_data() creates (defined with the evaluations).
+  struct Data;
   // F (or F - M a) into data->F: the inverse dynamics and the bushings.
   template <typename T, typename Positions, typename Velocities>
   void generalized_forces(double t, const Positions& q, const Velocities& v,
                           const double* acceleration, ArticulatedData<T>* data) const;
-  void exact_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void exact_jacobians(Data& data, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const double* acceleration, ForceJacobians* J) const;
   // Gravity as the world's upward acceleration, less the root's at t.
   Vec6<double> world_acceleration_at(double t) const;
@@ -201,17 +211,6 @@ class ArticulatedSystem : public System {
   bool constant_mass_ = false;
   mutable std::once_flag patterns_built_;
   mutable std::unique_ptr<Patterns> patterns_;
-  // Workspaces: inverse dynamics, its acceleration argument, and the
-  // composite rigid body algorithm's.
-  mutable std::unique_ptr<ArticulatedData<double>> data_;
-  mutable Eigen::VectorXd acceleration_;
-  mutable std::unique_ptr<CompositeRigidBodyData> crba_;
-  // The automatic differentiation's own workspace (dual numbers), made on
-  // its first use.
-  struct DualWorkspace;
-  mutable std::unique_ptr<DualWorkspace> dual_;
-  mutable std::unique_ptr<RneaDerivatives> derivatives_;  // made on first use
-  mutable std::unique_ptr<BushingDerivatives> bushing_derivatives_;  // made on first use
 };
 
 }  // namespace stiffsim

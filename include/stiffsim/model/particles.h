@@ -50,6 +50,13 @@ class ParticleSystem : public System {
   // naming the component otherwise.
   explicit ParticleSystem(ParticleDescription description);
 
+  // The overloads without a workspace (system.h).
+  using System::automatic_force_jacobians;
+  using System::energy;
+  using System::force_jacobians;
+  using System::forces;
+  using System::mass_matrix;
+
   Dimensions dimensions() const override;
   Capabilities capabilities() const override;
   std::string name() const override { return desc_.name; }
@@ -58,16 +65,16 @@ class ParticleSystem : public System {
   std::vector<std::string> velocity_names() const override;
 
   const SparseMatrix& mass_matrix_pattern() const override;
-  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
-  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
-              VectorRef F) const override;
+  void mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override;
   const ForceJacobians& jacobian_pattern() const override;
   // By default the derivative of the damping force through u(x) is dropped
   // from dF/dq (MODELS.md allows it; it changes the Newton rate, never the
   // solution), which keeps K symmetric; request.complete adds it (K is then
   // unsymmetric wherever springs move). With request.definite the transverse
   // factor (1 - L/l) is clamped at 0 and approximated_terms counts the springs.
-  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void force_jacobians(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
   // The complete Jacobians by forward-mode AD of the same spring kernel that
@@ -75,9 +82,9 @@ class ParticleSystem : public System {
   // and velocities of its two nodes): O(springs). Differentiates forces() as
   // it is, so a collapsed spring (force 0 by definition) contributes 0 where
   // force_jacobians() substitutes k I.
-  void automatic_force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
-                                 const ConstVectorRef& z, const JacobianRequest& request,
-                                 ForceJacobians* J) const override;
+  void automatic_force_jacobians(SystemData&, double t, const ConstVectorRef& q,
+                                 const ConstVectorRef& v, const ConstVectorRef& z,
+                                 const JacobianRequest& request, ForceJacobians* J) const override;
   // With a lattice whose springs all span an L1 distance <= 2 (stretch, shear
   // and bend of a cloth): node colour (i + 5 j) mod 13, a perfect Lee-code
   // tiling, so nodes of one colour are at L1 distance >= 5 and never share a
@@ -90,7 +97,7 @@ class ParticleSystem : public System {
   void point_kinematics(double t, int node, const Eigen::Vector3d& local, const ConstVectorRef& q,
                         const ConstVectorRef& v, PointKinematics* out) const override;
   // Kinetic + gravitational + spring potential energy.
-  double energy(const State& s) const override;
+  double energy(SystemData&, const State& s) const override;
 
   const ParticleDescription& description() const { return desc_; }
   int node_count() const { return static_cast<int>(desc_.positions.size()); }

@@ -21,6 +21,12 @@ class RobertsonSystem : public System {
   // Throws InputError unless every rate is finite and >= 0.
   explicit RobertsonSystem(double k1 = 0.04, double k2 = 3e7, double k3 = 1e4);
 
+  // The overloads without a workspace (system.h).
+  using System::force_jacobians;
+  using System::forces;
+  using System::mass_matrix;
+  using System::misc_derivatives;
+
   Dimensions dimensions() const override { return {0, 0, 3}; }
   Capabilities capabilities() const override;
   std::string name() const override { return "robertson"; }
@@ -30,15 +36,15 @@ class RobertsonSystem : public System {
   std::vector<std::string> misc_names() const override { return {"y1", "y2", "y3"}; }
 
   const SparseMatrix& mass_matrix_pattern() const override { return mass_pattern_; }
-  void mass_matrix(const ConstVectorRef& q, SparseMatrix* M) const override;
-  void forces(double t, const ConstVectorRef& q, const ConstVectorRef& v, const ConstVectorRef& z,
-              VectorRef F) const override;
-  void misc_derivatives(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void mass_matrix(SystemData&, const ConstVectorRef& q, SparseMatrix* M) const override;
+  void forces(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
+              const ConstVectorRef& z, VectorRef F) const override;
+  void misc_derivatives(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                         const ConstVectorRef& z, VectorRef zdot) const override;
   // Only dfz_dz is non-empty: a dense 3x3 block (its structural zeros are
   // stored so the pattern does not depend on the rates).
   const ForceJacobians& jacobian_pattern() const override { return jacobian_pattern_; }
-  void force_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+  void force_jacobians(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const ConstVectorRef& z, const JacobianRequest& request,
                        ForceJacobians* J) const override;
 
