@@ -21,12 +21,12 @@
 
 #include <benchmark/benchmark.h>
 
-#include <chrono>
 #include <cmath>
 #include <memory>
 #include <string>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/simulator.h"
 #include "stiffsim/integrators/velocity_implicit_euler.h"
 #include "stiffsim/model/articulated.h"
 #include "stiffsim/model/urdf.h"
@@ -87,22 +87,23 @@ std::pair<bool, double> run_vie(const Robot& robot, double kp) {
   settings.fixed_step = true;
   settings.max_step = kStep;
   VelocityImplicitEuler vie(*sys, settings, ImplicitSettings{});
-  vie.initialize(sys->initial_state());
+  // Every step's end, as MuJoCo's run below samples.
   std::vector<double> times;
   std::vector<Eigen::VectorXd> states;
-  double seconds = 0.0;
+  SimulationResult run;
   try {
-    while (vie.state().t < kFinalTime - 1e-12) {
-      const auto start = std::chrono::steady_clock::now();
-      vie.step_at_most(kFinalTime);
-      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      times.push_back(vie.state().t);
-      states.push_back(vie.state().x);
-    }
+    run = simulate(vie, sys->initial_state(), SimulationSettings{kFinalTime, 0.0},
+                   [&](double t, const Eigen::VectorXd& x) {
+                     if (t > 0.0) {
+                       times.push_back(t);
+                       states.push_back(x);
+                     }
+                     return true;
+                   });
   } catch (const IntegrationError&) {
     return {false, 0.0};
   }
-  return {held(*sys, times, states), seconds / static_cast<double>(times.size())};
+  return {held(*sys, times, states), run.wall_seconds / static_cast<double>(times.size())};
 }
 
 std::pair<bool, double> run_mujoco_implicit(const Robot& robot, double kp) {
@@ -111,7 +112,7 @@ std::pair<bool, double> run_mujoco_implicit(const Robot& robot, double kp) {
   p.integrator = "implicit";
   p.step = kStep;
   p.t_final = kFinalTime;
-  for (int k = 1; k * kStep <= kFinalTime + 1e-12; ++k) p.sample_times.push_back(k * kStep);
+  p.sample_times = sample_times(0.0, kFinalTime, kStep);
   const PeerRun run = run_mujoco(p);
   if (run.failed) return {false, 0.0};
   return {held(*sys, run.times, run.samples), run.wall_seconds / static_cast<double>(run.steps)};

@@ -6,6 +6,29 @@
 #include "stiffsim/integrators/wall_clock.h"
 
 namespace stiffsim {
+namespace {
+
+// Sample k >= 1 of a run (sample_times() in simulator.h).
+struct SampleGrid {
+  double t0, t_final, period;
+  double time(long k) const { return t0 + k * period; }
+  // A sample within round-off of a step end is taken at the step end.
+  double snap() const { return 1e-9 * period; }
+  // Sample k comes before t_final (which is always a sample of its own).
+  bool before_end(long k) const { return time(k) < t_final - snap(); }
+};
+
+}  // namespace
+
+std::vector<double> sample_times(double t0, double t_final, double period) {
+  std::vector<double> times;
+  if (period > 0.0) {
+    const SampleGrid grid{t0, t_final, period};
+    for (long k = 1; grid.before_end(k); ++k) times.push_back(grid.time(k));
+  }
+  times.push_back(t_final);
+  return times;
+}
 
 SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
@@ -26,10 +49,9 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
     result.wall_seconds = elapsed();
     return result;
   }
-  // Sample k is at t0 + k * period (computed by multiplication so samples do
-  // not drift); samples inside a step come from dense output.
+  // Samples inside a step come from dense output.
+  const SampleGrid grid{initial.t, t_final, period};
   long next_sample = 1;
-  auto sample_time = [&](long k) { return initial.t + k * period; };
   while (integrator.state().t < t_final) {
     integrator.step_at_most(t_final);
     const double t = integrator.state().t;
@@ -38,12 +60,9 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
       break;
     }
     if (period > 0.0) {
-      // A sample within round-off of the step end is taken at the step end.
-      const double snap = 1e-9 * period;
-      while (next_sample * period + initial.t <= t + snap &&
-             sample_time(next_sample) < t_final - snap) {
-        const double ts = sample_time(next_sample);
-        if (std::abs(ts - t) <= snap) {
+      while (grid.time(next_sample) <= t + grid.snap() && grid.before_end(next_sample)) {
+        const double ts = grid.time(next_sample);
+        if (std::abs(ts - t) <= grid.snap()) {
           sample = integrator.state().x;
         } else {
           integrator.interpolate(ts, &sample);

@@ -88,14 +88,7 @@ void TrajectoryWriter::write(double t, const Eigen::VectorXd& x) {
 void TrajectoryWriter::close_and_rename() {
   std::FILE* file = file_;
   file_ = nullptr;
-  const bool write_ok = std::fflush(file) == 0;
-  const bool close_ok = std::fclose(file) == 0;
-  if (!write_ok || !close_ok) {
-    const std::string why = std::strerror(errno);
-    std::remove(temp_path_.c_str());
-    throw std::runtime_error(temp_path_ + ": write failed (" + why + ")");
-  }
-  commit_temporary(temp_path_, path_);
+  close_and_commit(file, true, temp_path_, path_);
 }
 
 void TrajectoryWriter::finish() {

@@ -22,15 +22,6 @@ std::string MethodSpec::label() const {
   return buffer;
 }
 
-namespace {
-std::vector<double> sample_times(const BenchScene& scene) {
-  std::vector<double> t;
-  const int n = static_cast<int>(std::llround(scene.t_final / scene.sample_period));
-  for (int k = 1; k <= n; ++k) t.push_back(k * scene.sample_period);
-  return t;
-}
-}  // namespace
-
 MethodRun run_stiffsim(const BenchScene& bench, const MethodSpec& spec, const BenchRunOptions& options) {
   MethodRun run;
   run.spec = spec;
@@ -140,7 +131,8 @@ MethodRun run_cvode_peer(const BenchScene& bench, const MethodSpec& spec, const 
   CvodeOptions o;
   o.relative_tolerance = spec.parameter;
   o.absolute_tolerance = spec.parameter * 1e-2;
-  const PeerRun p = run_cvode(*bench.scene, bench.scene->initial_state(), sample_times(bench), o);
+  const PeerRun p = run_cvode(*bench.scene, bench.scene->initial_state(),
+                              sample_times(0.0, bench.t_final, bench.sample_period), o);
   run.times = p.times;
   run.samples = p.samples;
   run.wall_seconds = p.wall_seconds;

@@ -4,12 +4,13 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <sstream>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/simulator.h"
+#include "stiffsim/io/atomic_file.h"
 #include "stiffsim/peers/cvode_peer.h"
 #include "stiffsim/peers/mujoco_peer.h"
 #include "stiffsim/reports/method_run.h"
@@ -87,8 +88,7 @@ MethodRun run_mujoco_chain(const BenchScene& s, const std::string& urdf, const M
   p.integrator = spec.method == "mujoco-rk4" ? "RK4" : "implicit";
   p.step = spec.parameter;
   p.t_final = s.t_final;
-  const int samples = static_cast<int>(std::llround(s.t_final / s.sample_period));
-  for (int k = 1; k <= samples; ++k) p.sample_times.push_back(k * s.sample_period);
+  p.sample_times = sample_times(0.0, s.t_final, s.sample_period);
   try {
     const PeerRun r = run_mujoco(p);
     run.times = r.times;
@@ -219,7 +219,7 @@ int run_precision_report(const ReportOptions& options) {
     }
   }
 
-  std::ofstream csv(fs::path(options.out_dir) / "precision.csv");
+  std::ostringstream csv;
   csv << "scene,dofs,method,mode,parameter,error,wall_seconds,steps,newton_iterations,factorizations,finished,message\n";
   for (const Row& r : rows) {
     csv << csv_field(r.scene) << "," << r.dofs << "," << r.run.spec.method << ","
@@ -228,7 +228,9 @@ int run_precision_report(const ReportOptions& options) {
         << r.run.newton_iterations << "," << r.run.factorizations << "," << (r.run.finished ? 1 : 0) << ","
         << csv_field(r.run.message) << "\n";
   }
-  std::ofstream(fs::path(options.out_dir) / "precision.md") << md.str();
+  // Each file appears whole or not at all, and a failed write is an error.
+  write_file_atomically((fs::path(options.out_dir) / "precision.csv").string(), csv.str());
+  write_file_atomically((fs::path(options.out_dir) / "precision.md").string(), md.str());
   say("precision: wrote " + (fs::path(options.out_dir) / "precision.csv").string() + " and precision.md");
   return 0;
 }

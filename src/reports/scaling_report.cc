@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <limits>
 #include <map>
@@ -14,6 +13,7 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/io/atomic_file.h"
 #include "stiffsim/reports/child_process_run.h"
 #include "stiffsim/reports/method_run.h"
 #include "stiffsim/reports/reports.h"
@@ -165,7 +165,7 @@ int run_scaling_report(const ReportOptions& options) {
      << "| family | method | DOFs | ms/step | jacobian | assembly | factorization | solve "
      << "| derivatives | factorizations/step | nnz matrix | nnz factor | peak MB | solver |\n"
      << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-  std::ofstream csv(fs::path(options.out_dir) / "scaling.csv");
+  std::ostringstream csv;
   csv << "family,method,dofs,steps,ms_per_step,jacobian_ms,assembly_ms,factorization_ms,solve_ms,"
          "derivative_ms,factorizations_per_step,nnz_matrix,nnz_factor,peak_resident_mb,"
          "linear_solver,finished\n";
@@ -278,7 +278,9 @@ int run_scaling_report(const ReportOptions& options) {
        << format_number("%.2f", vie) << " | " << format_number("%.2f", ie) << " | "
        << format_number("%.1f", ie / vie) << " |\n";
   }
-  std::ofstream(fs::path(options.out_dir) / "scaling.md") << md.str();
+  // Each file appears whole or not at all, and a failed write is an error.
+  write_file_atomically((fs::path(options.out_dir) / "scaling.csv").string(), csv.str());
+  write_file_atomically((fs::path(options.out_dir) / "scaling.md").string(), md.str());
   say("scaling: wrote " + (fs::path(options.out_dir) / "scaling.csv").string() + " and scaling.md");
   return 0;
 }

@@ -7,12 +7,13 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <limits>
 #include <sstream>
 
 #include "stiffsim/error.h"
+#include "stiffsim/integrators/simulator.h"
+#include "stiffsim/io/atomic_file.h"
 #include "stiffsim/model/particle_meshes.h"
 #include "stiffsim/peers/mujoco_peer.h"
 #include "stiffsim/reports/method_run.h"
@@ -205,7 +206,7 @@ int run_stability_report(const ReportOptions& options) {
         p.integrator = integrator;
         p.step = c.h;
         p.t_final = s.t_final;
-        for (int k = 1; k * c.h <= s.t_final + 1e-12; ++k) p.sample_times.push_back(k * c.h);
+        p.sample_times = sample_times(0.0, s.t_final, c.h);
         Outcome o;
         o.case_name = c.name;
         o.method = std::string("mujoco-") + (std::string(integrator) == "RK4" ? "rk4" : "implicit");
@@ -246,7 +247,7 @@ int run_stability_report(const ReportOptions& options) {
     }
   }
 
-  std::ofstream csv(fs::path(options.out_dir) / "stability.csv");
+  std::ostringstream csv;
   csv << "case,method,verdict,pass,max_energy_gain_relative,steps,newton_failures,wall_seconds,message\n";
   std::ostringstream md;
   md << "# Stability\n\nMachine: " << machine_description() << ".\n\n"
@@ -268,7 +269,9 @@ int run_stability_report(const ReportOptions& options) {
        << o.newton_failures << " | " << format_number("%.3f", o.wall) << " |\n";
   }
   md << "\n" << passed << " of " << outcomes.size() << " runs pass.\n";
-  std::ofstream(fs::path(options.out_dir) / "stability.md") << md.str();
+  // Each file appears whole or not at all, and a failed write is an error.
+  write_file_atomically((fs::path(options.out_dir) / "stability.csv").string(), csv.str());
+  write_file_atomically((fs::path(options.out_dir) / "stability.md").string(), md.str());
   say("stability: wrote " + (fs::path(options.out_dir) / "stability.csv").string() + " and stability.md");
   return 0;
 }

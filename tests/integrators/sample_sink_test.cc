@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 #include "stiffsim/integrators/runge_kutta45.h"
 #include "stiffsim/integrators/simulator.h"
@@ -53,6 +54,37 @@ TEST(SampleSinks, EverySinkSeesTheSamplesOfTheClosedForm) {
     EXPECT_NEAR(a.first[k], std::exp(-a.times[k]), 1e-8);
   }
   EXPECT_EQ(a.ended_with, "<not ended>");  // the caller ends them
+}
+
+TEST(SampleSinks, PeersSampleAtTheTimesTheRunLoopDelivers) {
+  // sample_times() is what simulate() delivers after t0, for periods that
+  // divide the interval, that do not, and that miss t_final by round-off
+  // (0.1 * 3 != 0.3), from a start that is not 0.
+  LinearTestSystem system(-1.0);
+  struct Case {
+    double t0, t_final, period;
+    std::vector<double> expected;
+  };
+  const std::vector<Case> cases = {
+      {0.0, 1.0, 0.25, {0.25, 0.5, 0.75, 1.0}},
+      {0.0, 1.0, 0.3, {0.3, 0.6, 0.3 * 3, 1.0}},
+      {0.0, 0.3, 0.1, {0.1, 0.2, 0.3}},
+      {0.5, 1.0, 0.2, {0.7, 0.9, 1.0}},
+      {0.0, 1.0, 0.0, {1.0}},
+  };
+  for (const Case& c : cases) {
+    const std::vector<double> times = sample_times(c.t0, c.t_final, c.period);
+    EXPECT_EQ(times, c.expected) << c.t0 << " " << c.t_final << " " << c.period;
+    if (c.period <= 0.0) continue;  // the loop then samples every step end
+    RungeKutta45 integrator(system, IntegratorSettings{});
+    Recording run;
+    State initial = system.initial_state();
+    initial.t = c.t0;
+    simulate(integrator, initial, SimulationSettings{c.t_final, c.period}, {&run});
+    ASSERT_FALSE(run.times.empty());
+    EXPECT_EQ(run.times.front(), c.t0);
+    EXPECT_EQ(std::vector<double>(run.times.begin() + 1, run.times.end()), times);
+  }
 }
 
 TEST(SampleSinks, ADecliningSinkStopsTheRunAfterTheOthersSawTheSample) {

@@ -4,6 +4,7 @@
 // inside a step) to a callback.
 
 #include <functional>
+#include <vector>
 
 #include "stiffsim/integrators/integrator_base.h"
 #include "stiffsim/integrators/sample_sink.h"
@@ -37,6 +38,13 @@ SimulationResult simulate(IntegratorBase& integrator, const State& initial,
                           const SimulationSettings& settings, const SampleCallback& on_sample,
                           const ProgressCallback& on_progress = nullptr,
                           const StepCallback& on_step = nullptr);
+
+// The times simulate() samples after t0 for this period: t0 + k * period
+// (k = 1, 2, ...; by multiplication, so they do not drift) while more than
+// 1e-9 of a period before t_final, then t_final. Peers that sample at given
+// times (CVODE, MuJoCo) take these, so every method of a report is compared
+// at the same instants. period <= 0: t_final alone.
+std::vector<double> sample_times(double t0, double t_final, double period);
 
 // As above, each sample handed to every sink in order; the run stops after a
 // sample that any sink declined. The sinks are not ended: the caller does

@@ -3,6 +3,7 @@
 // "<path>.tmp" and renamed to <path> when complete, so a reader (or a run
 // that failed half-way) never leaves a half-written file under the name.
 
+#include <cstdio>
 #include <string>
 
 namespace stiffsim {
@@ -10,6 +11,12 @@ namespace stiffsim {
 // Renames the finished `temp` to `path`; on failure removes `temp` and
 // throws std::runtime_error naming both.
 void commit_temporary(const std::string& temp, const std::string& path);
+
+// Closes `file`, the temporary `temp` being written for `path`, and commits
+// it; when `written` is false (a write failed) or the close fails, removes
+// `temp` and throws std::runtime_error naming it with errno's reason.
+void close_and_commit(std::FILE* file, bool written, const std::string& temp,
+                      const std::string& path);
 
 // Writes `text` to "<path>.tmp" and commits it to `path`; throws
 // std::runtime_error naming the file (the temporary removed) on failure.
