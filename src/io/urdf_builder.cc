@@ -1,6 +1,7 @@
 // URDF components of a scene file: the tree, its formulation, initial
 // state, joint springs, drives and root motion.
 
+#include <algorithm>
 #include <filesystem>
 #include <optional>
 
@@ -12,6 +13,22 @@
 namespace stiffsim {
 namespace scene_file {
 namespace {
+
+// The body moved by the joint named by `key` in `where`; a fixed joint
+// (welded away) and an unknown name each get their own message.
+int body_of_joint(const Section& c, const YAML::Node& key, const RigidTree& tree,
+                  const std::string& where) {
+  const std::string joint = key.Scalar();
+  for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
+    if (tree.bodies[i].joint == joint) return static_cast<int>(i);
+  }
+  const auto& fixed = tree.fixed_joints;
+  if (std::find(fixed.begin(), fixed.end(), joint) != fixed.end()) {
+    c.fail(key, "joint '" + joint + "' in " + where + " is a fixed joint of " + tree.file +
+                    " (welded into its parent link): only moving joints take it");
+  }
+  c.fail(key, "unknown joint '" + joint + "' in " + where + " (not a joint of " + tree.file + ")");
+}
 
 // A per-joint setting given as one number for every 1-DOF joint or as a map
 // joint name -> number; `index` maps the URDF's moving joint names to bodies.
@@ -34,12 +51,7 @@ std::vector<double> per_joint(const Section& c, const std::string& key, Range ra
   for (const auto& entry : n) {
     const std::string joint = entry.first.Scalar();
     const std::string what = c.label(key) + "." + joint;
-    std::size_t i = 0;
-    while (i < tree.bodies.size() && tree.bodies[i].joint != joint) ++i;
-    if (i == tree.bodies.size()) {
-      c.fail(entry.first, "unknown joint '" + joint + "' in " + c.label(key) +
-                              " (not a moving joint of " + tree.file + ")");
-    }
+    const std::size_t i = body_of_joint(c, entry.first, tree, c.label(key));
     if (!one_dof(i)) {
       c.fail(entry.first, what + ": joint '" + joint + "' is " +
                               joint_type_name(tree.bodies[i].type) +
@@ -48,16 +60,6 @@ std::vector<double> per_joint(const Section& c, const std::string& key, Range ra
     values[i] = c.number_value(entry.second, what, range);
   }
   return values;
-}
-
-int body_of_joint(const Section& c, const YAML::Node& key, const RigidTree& tree,
-                  const std::string& where) {
-  const std::string joint = key.Scalar();
-  for (std::size_t i = 0; i < tree.bodies.size(); ++i) {
-    if (tree.bodies[i].joint == joint) return static_cast<int>(i);
-  }
-  c.fail(key, "unknown joint '" + joint + "' in " + where + " (not a moving joint of " + tree.file +
-                  ")");
 }
 
 // Values of one joint in `initial`: a number for a 1-DOF joint, a list of
@@ -90,13 +92,7 @@ std::vector<JointDrive> read_drives(const Section& c, const RigidTree& tree) {
     const std::string what = "drives[" + std::to_string(k) + "]";
     const Section d(c.doc(), list[k], c.context(), what + ".", {"joint", "kp", "kd", "target"});
     const YAML::Node joint = d.require("joint");
-    std::size_t i = 0;
-    while (i < tree.bodies.size() && tree.bodies[i].joint != joint.Scalar()) ++i;
-    if (i == tree.bodies.size()) {
-      d.fail(joint, "unknown joint '" + joint.Scalar() + "' in " + what +
-                        " (not a moving joint of " + tree.file +
-                        "; fixed joints are welded and take no drive)");
-    }
+    const std::size_t i = body_of_joint(d, joint, tree, what);
     if (joint_nv(tree.bodies[i].type) != 1) {
       d.fail(joint, what + ": joint '" + joint.Scalar() + "' is " +
                         joint_type_name(tree.bodies[i].type) +

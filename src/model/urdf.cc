@@ -569,6 +569,7 @@ RigidTree parse_urdf(const std::string& xml, const std::string& source_name,
     }
 
     if (joint.type == urdf::Joint::FIXED) {
+      tree.fixed_joints.push_back(joint.name);
       // Welded to the world, the link's mass never moves and drops out.
       if (pending.owner >= 0) {
         TreeBody& owner = tree.bodies[pending.owner];

@@ -836,11 +836,29 @@ TEST(SceneYamlUrdf, DriveErrorsNameTheLine) {
     }
     return std::string("no error");
   };
-  // Unknown (or fixed, hence welded) joint: the line of the joint name.
+  // Unknown joint: the line of the joint name.
   const std::string unknown = error("      - {joint: gripper, kp: 1, target: 0}\n");
   EXPECT_NE(unknown.find("bad.yaml:7:"), std::string::npos) << unknown;
-  EXPECT_NE(unknown.find("unknown joint 'gripper' in drives[0]"), std::string::npos) << unknown;
-  EXPECT_NE(unknown.find("fixed joints are welded"), std::string::npos) << unknown;
+  EXPECT_NE(unknown.find("unknown joint 'gripper' in drives[0] (not a joint of"), std::string::npos)
+      << unknown;
+  // A fixed joint of the URDF (welded away) says so, for drives and for
+  // per-joint settings alike.
+  for (const std::string& setting :
+       {std::string("drives:\n      - {joint: imu_mount, kp: 1, target: 0}\n"),
+        std::string("joint_stiffness: {imu_mount: 3}\n")}) {
+    std::string message = "no error";
+    try {
+      parse_scene("components:\n  - name: c\n    type: urdf\n    file: tree.urdf\n    " + setting,
+                  model_path("bad.yaml"));
+    } catch (const InputError& e) {
+      message = e.what();
+    }
+    EXPECT_NE(message.find("bad.yaml:"), std::string::npos) << message;
+    EXPECT_NE(message.find("joint 'imu_mount' in"), std::string::npos) << message;
+    EXPECT_NE(message.find("is a fixed joint of"), std::string::npos) << message;
+    EXPECT_NE(message.find("tree.urdf (welded into its parent link)"), std::string::npos)
+        << message;
+  }
   // Keyframes out of order: the line of the offending time.
   const std::string order = error(
       "      - joint: joint_1\n        kp: 1\n        target:\n"

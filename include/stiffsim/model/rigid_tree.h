@@ -47,6 +47,9 @@ struct RigidTree {
   std::string file;  // source file, for messages
   // Parents come before children (parent < own index).
   std::vector<TreeBody> bodies;
+  // The URDF's fixed joints, welded away: kept so that a message about one
+  // can say it is fixed rather than unknown.
+  std::vector<std::string> fixed_joints;
 };
 
 // MODELS.md "Shipped chain models": `links` rods of 0.1 m and 0.1 kg hanging
