@@ -572,8 +572,21 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);
     // The residual itself: with W >= M the error of the iterate's
-    // unknowns is at most its residual in their units (r_i / m_i).
-    const bool residual_converged = krylov && residual_norm(r_) <= newton_tolerance();
+    // unknowns is at most its residual in their units (r_i / m_i). On the
+    // direct paths too it ends the iteration as soon as it holds, where the
+    // rate test (from the third iteration on) would pay two more updates.
+    // Measured on the 8x8 cloth under error control at accuracy 1e-5: 1.6
+    // Newton iterations per solve instead of 3.0, half the run time, and
+    // the same error against RK45 at 1e-11 (to 0.5%, accuracies 1e-3 to
+    // 1e-5). Two exceptions go on to the rate test:
+    // - the extrapolated methods: 2 x_small - x_big amplifies the errors of
+    //   its three solves, and their tolerance rule
+    //   (extrapolation_newton_tolerance) assumes solves the rate test ended;
+    // - an iterate whose energy rose beyond round-off: the energy guard then
+    //   judges the root by an identity that holds at the root itself.
+    const bool residual_converged =
+        residual_norm(r_) <= newton_tolerance() &&
+        (krylov || (!implicit_.extrapolate && energy_within_round_off(x0, *x)));
     if (alpha < 1.0 && !residual_converged) {
       // A damped step says nothing about the rate of the undamped
       // iteration: the next full update is measured against the last full
@@ -599,6 +612,13 @@ double ImplicitIntegrator::energy_gain(const Eigen::VectorXd& x0, const Eigen::V
   // Round-off of the energy sums and the Newton tolerance's share.
   *allowance = 1e-8 * (std::abs(before) + std::abs(after)) + 1e-12;
   return after - before;
+}
+
+bool ImplicitIntegrator::energy_within_round_off(const Eigen::VectorXd& x0,
+                                                 const Eigen::VectorXd& x) {
+  if (!guard_energy_ || energy_guard_suspended_) return true;
+  double allowance = 0.0;
+  return energy_gain(x0, x, &allowance) <= allowance;
 }
 
 double ImplicitIntegrator::guard_energy(const Eigen::VectorXd& x) {

@@ -33,6 +33,37 @@ TEST(VelocityImplicitEuler, GlobalErrorIsFirstOrderOnSpringDamper) {
   EXPECT_LT(slope, 1.1);
 }
 
+TEST(VelocityImplicitEuler, ASolveEndsOnceItsResidualIsBelowTheTolerance) {
+  // The spring-damper along its axis is linear: the chord's matrix is the
+  // exact Jacobian, so the first update leaves a residual at round-off, and
+  // that residual (evaluated for the line search anyway) ends the solve.
+  // The rate test alone would pay a second update to see the first one
+  // converged. vie2 keeps the rate test (its extrapolation amplifies the
+  // solves' errors), and takes at least two updates per solve.
+  const SpringDamper sd;
+  auto sys = sd.system();
+  ImplicitSettings chord;
+  chord.newton_solve = NewtonSolve::kChord;
+  ImplicitSettings extrapolated = chord;
+  extrapolated.extrapolate = true;
+  VelocityImplicitEuler vie(*sys, fixed(0.01, false, 1e-6), chord);
+  VelocityImplicitEuler vie2(*sys, fixed(0.01, false, 1e-6), extrapolated);
+  // Full Newton to round-off: the roots themselves.
+  ImplicitSettings fresh;
+  fresh.newton_solve = NewtonSolve::kFresh;
+  VelocityImplicitEuler exact(*sys, fixed(0.01, false, 1e-14), fresh);
+  for (VelocityImplicitEuler* m : {&vie, &vie2, &exact}) {
+    m->initialize(sys->initial_state());
+    m->integrate_to(1.0);
+  }
+  const IntegratorStatistics& st = vie.statistics();
+  EXPECT_EQ(st.newton_solves, 100);
+  EXPECT_EQ(st.newton_raphson_iterations, st.newton_solves);
+  EXPECT_GE(vie2.statistics().newton_raphson_iterations, 2 * vie2.statistics().newton_solves);
+  // Each step's root to round-off, after 100 steps.
+  EXPECT_LT((vie.state().x - exact.state().x).lpNorm<Eigen::Infinity>(), 1e-12);
+}
+
 TEST(VelocityImplicitEuler, ErrorEstimateIsSecondOrder) {
   const SpringDamper sd;
   auto sys = sd.system();

@@ -288,6 +288,9 @@ class ImplicitIntegrator : public IntegratorBase {
                            const Eigen::VectorXd& x);
   // E(x) - E(x0), and its round-off allowance in *allowance.
   double energy_gain(const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double* allowance);
+  // True unless the energy guard is on and x gained energy over x0 beyond
+  // round-off (then passes_energy_guard() would consult its criterion).
+  bool energy_within_round_off(const Eigen::VectorXd& x0, const Eigen::VectorXd& x);
   // E(x) for the guard (a passive scene: no dependence on t), remembered for
   // the last two states: a step's end is the next solve's start, and the
   // solves of step doubling share their starts.
