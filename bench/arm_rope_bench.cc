@@ -21,6 +21,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
+#include <memory>
 #include <string>
 #include <vector>
 

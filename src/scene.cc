@@ -2,6 +2,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <functional>
 #include <stdexcept>
@@ -110,6 +111,7 @@ Scene::Scene(std::string name, std::vector<std::unique_ptr<System>> components,
 // scratch of the attachments' points, and matrices with the components'
 // own patterns to gather from.
 struct Scene::Data : SystemData {
+  const Scene* owner = nullptr;  // the scene that made it (checked in debug builds)
   std::vector<std::unique_ptr<SystemData>> components;
   PointKinematics point_a, point_b;
   // dp_dot/dq per column of both points (add_attachment_jacobians()).
@@ -124,8 +126,15 @@ struct Scene::Data : SystemData {
   std::vector<ForceJacobians> J;
 };
 
+Scene::Data& Scene::own(SystemData& data) const {
+  Data& d = static_cast<Data&>(data);
+  assert(d.owner == this && "a SystemData fits only the system that made it");
+  return d;
+}
+
 std::unique_ptr<SystemData> Scene::make_data() const {
   auto data = std::make_unique<Data>();
+  data->owner = this;
   for (size_t i = 0; i < components_.size(); ++i) {
     const System& c = *components_[i];
     data->components.push_back(c.make_data());
@@ -447,7 +456,7 @@ void Scene::map_velocity_to_qdot(const ConstVectorRef& q, const ConstVectorRef& 
 
 void Scene::velocity_map(SystemData& data, const ConstVectorRef& q, SparseMatrix* N) const {
   if (caps_.identity_velocity_map) return System::velocity_map(data, q, N);
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   set_zero_keep_pattern(N);
   for (size_t i = 0; i < components_.size(); ++i) {
     const System& c = *components_[i];
@@ -473,7 +482,7 @@ bool Scene::project_positions(VectorRef q) const {
 }
 
 void Scene::mass_matrix(SystemData& data, const ConstVectorRef& q, SparseMatrix* M) const {
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   if (components_.size() == 1) return components_[0]->mass_matrix(*d.components[0], q, M);
   const Patterns& L = patterns();
   if (d.M.empty()) {
@@ -489,7 +498,7 @@ void Scene::mass_matrix(SystemData& data, const ConstVectorRef& q, SparseMatrix*
 
 void Scene::forces(SystemData& data, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                    const ConstVectorRef& z, VectorRef F) const {
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
@@ -502,7 +511,7 @@ void Scene::forces(SystemData& data, double t, const ConstVectorRef& q, const Co
 void Scene::momentum_residual(SystemData& data, double t, const ConstVectorRef& q,
                               const ConstVectorRef& v, const ConstVectorRef& z,
                               const ConstVectorRef& dv, double h, VectorRef r) const {
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
@@ -524,7 +533,7 @@ void Scene::misc_derivatives(SystemData& data, double t, const ConstVectorRef& q
                              const ConstVectorRef& v, const ConstVectorRef& z,
                              VectorRef zdot) const {
   if (dims_.nz == 0) return;
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   for (size_t i = 0; i < components_.size(); ++i) {
     const Dimensions n = components_[i]->dimensions();
     const Dimensions& o = offsets_[i];
@@ -537,7 +546,7 @@ void Scene::misc_derivatives(SystemData& data, double t, const ConstVectorRef& q
 void Scene::force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
                             const ConstVectorRef& v, const ConstVectorRef& z,
                             const JacobianRequest& request, ForceJacobians* J) const {
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   gather_jacobians(d, t, q, v, z, request, J, &System::force_jacobians);
   if (!attachments_.empty()) add_attachment_jacobians(d, t, q, v, request.complete, J);
 }
@@ -545,7 +554,7 @@ void Scene::force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
 void Scene::automatic_force_jacobians(SystemData& data, double t, const ConstVectorRef& q,
                                       const ConstVectorRef& v, const ConstVectorRef& z,
                                       const JacobianRequest& request, ForceJacobians* J) const {
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   gather_jacobians(d, t, q, v, z, request, J, &System::automatic_force_jacobians);
   if (!attachments_.empty()) add_attachment_jacobians(d, t, q, v, true, J);
 }
@@ -602,7 +611,7 @@ std::vector<int> Scene::jacobian_colouring_hint() const {
 
 double Scene::energy(SystemData& data, const State& s) const {
   if (!caps_.has_energy) return std::nan("");
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   double e = 0.0;
   if (components_.size() == 1) {
     // One component's state is the scene's: no copy.

@@ -87,6 +87,8 @@ class Scene : public System {
 
  private:
   struct Data;
+  // `data` as this scene's (it must have made it).
+  Data& own(SystemData& data) const;
   using JacobianMethod = void (System::*)(SystemData&, double, const ConstVectorRef&,
                                           const ConstVectorRef&, const ConstVectorRef&,
                                           const JacobianRequest&, ForceJacobians*) const;

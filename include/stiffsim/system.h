@@ -76,8 +76,10 @@ struct JacobianRequest {
 // workspaces, scratch matrices, a scene's components' own data) lives in a
 // SystemData that the system's make_data() creates. Whoever evaluates owns
 // one (every integrator and Jacobian evaluator does, per system), so
-// evaluations allocate nothing and one system serves several threads, each
-// with its own data. A data fits only the system that made it.
+// evaluations allocate nothing once each kind has run (a few workspaces,
+// such as the Jacobians' derivative passes, are made in the data on their
+// first use) and one system serves several threads, each with its own
+// data. A data fits only the system that made it (debug builds check).
 class SystemData {
  public:
   virtual ~SystemData() = default;

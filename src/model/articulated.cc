@@ -1,6 +1,7 @@
 #include "stiffsim/model/articulated.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <sstream>
 #include <unsupported/Eigen/AutoDiff>
@@ -48,8 +49,9 @@ struct DualWorkspace {
 }  // namespace
 
 struct ArticulatedSystem::Data : SystemData {
-  explicit Data(const ArticulatedModel& model)
-      : inverse_dynamics(model), acceleration(model.nv), crba(model) {}
+  Data(const ArticulatedSystem* system, const ArticulatedModel& model)
+      : owner(system), inverse_dynamics(model), acceleration(model.nv), crba(model) {}
+  const ArticulatedSystem* owner;  // checked in debug builds
   ArticulatedData<double> inverse_dynamics;
   Eigen::VectorXd acceleration;  // momentum_residual()'s dv / h
   CompositeRigidBodyData crba;
@@ -61,7 +63,13 @@ struct ArticulatedSystem::Data : SystemData {
 };
 
 std::unique_ptr<SystemData> ArticulatedSystem::make_data() const {
-  return std::make_unique<Data>(model_);
+  return std::make_unique<Data>(this, model_);
+}
+
+ArticulatedSystem::Data& ArticulatedSystem::own(SystemData& data) const {
+  Data& d = static_cast<Data&>(data);
+  assert(d.owner == this && "a SystemData fits only the system that made it");
+  return d;
 }
 
 ArticulatedSystem::~ArticulatedSystem() = default;
@@ -403,7 +411,7 @@ bool ArticulatedSystem::project_positions(VectorRef q) const {
 
 void ArticulatedSystem::mass_matrix(SystemData& data, const ConstVectorRef& q,
                                     SparseMatrix* M) const {
-  composite_rigid_body(model_, q, patterns().mass_slots, &static_cast<Data&>(data).crba, M);
+  composite_rigid_body(model_, q, patterns().mass_slots, &own(data).crba, M);
 }
 
 template <typename T, typename Positions, typename Velocities>
@@ -421,7 +429,7 @@ void ArticulatedSystem::forces(SystemData& data, double t, const ConstVectorRef&
                                const ConstVectorRef& v, const ConstVectorRef& z,
                                VectorRef F) const {
   (void)z;
-  ArticulatedData<double>& id = static_cast<Data&>(data).inverse_dynamics;
+  ArticulatedData<double>& id = own(data).inverse_dynamics;
   generalized_forces<double>(t, q, v, nullptr, &id);
   F = id.F;
   add_drive_torques(t, F);
@@ -438,7 +446,7 @@ void ArticulatedSystem::momentum_residual(SystemData& data, double t, const Cons
                                           const ConstVectorRef& dv, double h, VectorRef r) const {
   // F - M(q) a at a = dv / h is -(M dv - h F) / h.
   (void)z;
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   d.acceleration = dv / h;
   generalized_forces<double>(t, q, v, d.acceleration.data(), &d.inverse_dynamics);
   add_drive_torques(t, d.inverse_dynamics.F);
@@ -496,7 +504,7 @@ void ArticulatedSystem::force_jacobians(SystemData& data, double t, const ConstV
                                         const ConstVectorRef& v, const ConstVectorRef& z,
                                         const JacobianRequest& request, ForceJacobians* J) const {
   (void)z;
-  Data& d = static_cast<Data&>(data);
+  Data& d = own(data);
   if (!options_.bushings.empty()) {
     if (!d.bushing_derivatives) d.bushing_derivatives = std::make_unique<BushingDerivatives>(*this);
     d.bushing_derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
@@ -541,7 +549,7 @@ void ArticulatedSystem::automatic_force_jacobians(SystemData& data, double t,
                                                   const JacobianRequest& request,
                                                   ForceJacobians* J) const {
   (void)z;
-  exact_jacobians(static_cast<Data&>(data), t, q, v, request.acceleration, J);
+  exact_jacobians(own(data), t, q, v, request.acceleration, J);
 }
 
 std::vector<Pose<double>> ArticulatedSystem::world_poses(const Eigen::VectorXd& q) const {

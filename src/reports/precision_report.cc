@@ -1,7 +1,6 @@
 // Work-precision: the error of every method against a stated reference, and
 // the wall time it took, over accuracy targets and fixed steps.
 
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <limits>

@@ -181,8 +181,10 @@ class ArticulatedSystem : public System {
   int jacobian_passes() const { return patterns().jacobian_passes; }
 
  private:
-  // The workspace make_data() creates (defined with the evaluations).
+  // The workspace make_data() creates (defined with the evaluations), and
+  // `data` as this system's (it must have made it).
   struct Data;
+  Data& own(SystemData& data) const;
   // F (or F - M a) into data->F: the inverse dynamics and the bushings.
   template <typename T, typename Positions, typename Velocities>
   void generalized_forces(double t, const Positions& q, const Velocities& v,
