@@ -148,18 +148,32 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
       }
     }
   }
-  // A spring k (q - rest) and a drive kp (q - p(t)) are one spring of
-  // stiffness k + kp about k rest / (k + kp) plus the torque kp p(t): the
-  // model keeps the combined spring, add_drive_torques() the torque.
-  combined_joint_forces_ = options_.joint_forces;
-  if (!options_.drives.empty() && combined_joint_forces_.empty()) combined_joint_forces_.resize(nb);
-  for (const JointDrive& dr : options_.drives) {
-    JointForce& jf = combined_joint_forces_[dr.body];
-    const double k = jf.stiffness + dr.kp;
-    jf.rest = k > 0.0 ? jf.stiffness * jf.rest / k : 0.0;
-    jf.stiffness = k;
-    jf.damping += dr.kd;
+  // The force elements. A joint's spring and damper is one element (the
+  // URDF's damping plus the scene's); a drive is another on the same
+  // coordinate.
+  pivot_stiffness_.assign(nb, 0.0);
+  pivot_damping_.assign(nb, 0.0);
+  for (int i = 0; i < nb; ++i) {
+    const TreeBody& b = model_.tree.bodies[i];
+    if (joint_nv(b.type) != 1) continue;
+    const JointForce jf = options_.joint_forces.empty() ? JointForce{} : options_.joint_forces[i];
+    const double c = b.damping + jf.damping;
+    if (jf.stiffness == 0.0 && c == 0.0) continue;
+    elements_.joint_springs.elements.emplace_back(i, model_.q_offset[i], model_.v_offset[i],
+                                                  jf.stiffness, jf.rest, c);
   }
+  for (const JointDrive& dr : options_.drives) {
+    elements_.drives.elements.emplace_back(dr.body, model_.q_offset[dr.body],
+                                           model_.v_offset[dr.body], dr.kp, dr.kd, dr.target);
+  }
+  for_each_element_set([this](const auto& set, int) {
+    for (const auto& e : set.elements) {
+      if constexpr (std::decay_t<decltype(e)>::kJointLocal) {
+        pivot_stiffness_[e.body()] += e.stiffness();
+        pivot_damping_[e.body()] += e.damping();
+      }
+    }
+  });
   for (const Bushing& bu : options_.bushings) {
     for (int body : {bu.parent, bu.child}) {
       if (body < -1 || body >= nb || (body >= 0 && !is_free_root(model_.tree.bodies[body])) ||
@@ -195,9 +209,6 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   model_.nq = dims_.nq;
   model_.nv = dims_.nv;
   model_.world_acceleration.tail<3>() = -options_.gravity;
-  model_.stiffness.assign(nb, 0.0);
-  model_.rest.assign(nb, 0.0);
-  model_.damping.assign(nb, 0.0);
   constant_mass_ = true;
   for (int i = 0; i < nb; ++i) {
     const TreeBody& b = model_.tree.bodies[i];
@@ -211,12 +222,6 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
     // own frame, a free body whose origin is its centre of mass has the
     // constant M = diag(m I, I_c); anything else moves M with q.
     constant_mass_ &= is_free_root(b) && b.inertia.com.isZero(0.0);
-    if (joint_nv(b.type) != 1) continue;
-    model_.damping[i] = b.damping;
-    if (combined_joint_forces_.empty()) continue;
-    model_.damping[i] += combined_joint_forces_[i].damping;
-    model_.stiffness[i] = combined_joint_forces_[i].stiffness;
-    model_.rest[i] = combined_joint_forces_[i].rest;
   }
 
   PatternBuilder Np(dims_.nq, dims_.nv);
@@ -236,7 +241,7 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   // child's joint axis, a massless leaf) makes M singular; say so here rather
   // than fail in the first Newton solve. The articulated-body pivots are
   // those of an LDL^T factorization of M: O(n), whatever the tree.
-  ArticulatedBodySolver pivots(model_);
+  ArticulatedBodySolver pivots(model_, pivot_stiffness_, pivot_damping_);
   if (!pivots.factor(options_.initial_q, 0.0)) {
     throw InputError(w + ": the mass matrix is singular at the initial state: some joint motion moves "
                          "no mass (e.g. a massless floating root turning about its child's joint axis, "
@@ -282,10 +287,16 @@ const ArticulatedSystem::Patterns& ArticulatedSystem::patterns() const {
       if (bu.parent >= 0) add_pair(bu.parent, bu.child);
       add_pair(bu.child, bu.child);
     }
+    for_each_element_set([&](const auto& set, int) {
+      set.add_to_patterns([&](int r, int c) { K.add(r, c); }, [&](int r, int c) { D.add(r, c); });
+    });
     P->mass = M.build();
     P->jacobians = empty_jacobians(dims_);
     P->jacobians.dF_dq = K.build();
     P->jacobians.dF_dv = D.build();
+    for_each_element_set([&](const auto& set, int type) {
+      P->element_slots[type] = set.find_slots(P->jacobians.dF_dq, P->jacobians.dF_dv);
+    });
 
     P->mass_slots = composite_rigid_body_slots(model_, P->mass);
 
@@ -423,6 +434,8 @@ void ArticulatedSystem::generalized_forces(double t, const Positions& q, const V
   for (const Bushing& bu : options_.bushings) {
     add_bushing_forces<T>(bu, q, v, model_.q_offset, model_.v_offset, &data->F);
   }
+  for_each_element_set(
+      [&](const auto& set, int) { set.template add_forces<T>(t, q, v, &data->F); });
 }
 
 void ArticulatedSystem::forces(SystemData& data, double t, const ConstVectorRef& q,
@@ -432,13 +445,6 @@ void ArticulatedSystem::forces(SystemData& data, double t, const ConstVectorRef&
   ArticulatedData<double>& id = own(data).inverse_dynamics;
   generalized_forces<double>(t, q, v, nullptr, &id);
   F = id.F;
-  add_drive_torques(t, F);
-}
-
-void ArticulatedSystem::add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> F) const {
-  for (const JointDrive& dr : options_.drives) {
-    F[model_.v_offset[dr.body]] += dr.kp * dr.target.value(t) + dr.kd * dr.target.rate(t);
-  }
 }
 
 void ArticulatedSystem::momentum_residual(SystemData& data, double t, const ConstVectorRef& q,
@@ -449,7 +455,6 @@ void ArticulatedSystem::momentum_residual(SystemData& data, double t, const Cons
   Data& d = own(data);
   d.acceleration = dv / h;
   generalized_forces<double>(t, q, v, d.acceleration.data(), &d.inverse_dynamics);
-  add_drive_torques(t, d.inverse_dynamics.F);
   r = -h * d.inverse_dynamics.F;
 }
 
@@ -457,7 +462,7 @@ std::unique_ptr<StructuredNewtonMatrix> ArticulatedSystem::make_structured_newto
   // Bushings couple free bodies through stiffness the recursion cannot fold
   // into joint-space pivots; their systems assemble the sparse matrix.
   if (!options_.bushings.empty()) return nullptr;
-  return std::make_unique<ArticulatedBodySolver>(model_);
+  return std::make_unique<ArticulatedBodySolver>(model_, pivot_stiffness_, pivot_damping_);
 }
 
 void ArticulatedSystem::exact_jacobians(Data& workspace, double t, const ConstVectorRef& q,
@@ -508,6 +513,7 @@ void ArticulatedSystem::force_jacobians(SystemData& data, double t, const ConstV
   if (!options_.bushings.empty()) {
     if (!d.bushing_derivatives) d.bushing_derivatives = std::make_unique<BushingDerivatives>(*this);
     d.bushing_derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+    add_element_jacobians(t, q, v, J);
     J->approximated_terms = 0;
     return;
   }
@@ -515,7 +521,15 @@ void ArticulatedSystem::force_jacobians(SystemData& data, double t, const ConstV
     d.derivatives = std::make_unique<RneaDerivatives>(make_rnea_derivatives(*this));
   const Vec6<double> world_acceleration = world_acceleration_at(t);
   d.derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv, &world_acceleration);
+  add_element_jacobians(t, q, v, J);
   J->approximated_terms = 0;
+}
+
+void ArticulatedSystem::add_element_jacobians(double t, const ConstVectorRef& q,
+                                              const ConstVectorRef& v, ForceJacobians* J) const {
+  const Patterns& P = patterns();
+  for_each_element_set(
+      [&](const auto& set, int type) { set.add_jacobians(t, q, v, P.element_slots[type], J); });
 }
 
 Vec6<double> ArticulatedSystem::world_acceleration_at(double t) const {
@@ -590,19 +604,8 @@ double ArticulatedSystem::energy(SystemData&, const State& s) const {
   for (int i = 0; i < static_cast<int>(world.size()); ++i) {
     e -= model_.inertia[i].mass * options_.gravity.dot(world[i].R * model_.inertia[i].com + world[i].p);
   }
-  for (int i = 0; i < static_cast<int>(options_.joint_forces.size()); ++i) {
-    const JointForce& jf = options_.joint_forces[i];
-    if (joint_nv(model_.tree.bodies[i].type) != 1 || jf.stiffness == 0.0) continue;
-    const double dq = q[model_.q_offset[i]] - jf.rest;
-    e += 0.5 * jf.stiffness * dq * dq;
-  }
   for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, model_.q_offset, model_.v_offset);
-  // A drive stores the energy of its spring about the current target (its
-  // moving target does work, which the system does not conserve).
-  for (const JointDrive& dr : options_.drives) {
-    const double dq = q[model_.q_offset[dr.body]] - dr.target.value(s.t);
-    e += 0.5 * dr.kp * dq * dq;
-  }
+  for_each_element_set([&](const auto& set, int) { e += set.energy(s.t, q); });
   return e;
 }
 

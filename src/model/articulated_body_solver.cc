@@ -6,8 +6,12 @@
 
 namespace stiffsim {
 
-ArticulatedBodySolver::ArticulatedBodySolver(const ArticulatedModel& model)
+ArticulatedBodySolver::ArticulatedBodySolver(const ArticulatedModel& model,
+                                             std::vector<double> stiffness,
+                                             std::vector<double> damping)
     : model_(model),
+      stiffness_(std::move(stiffness)),
+      damping_(std::move(damping)),
       X_(model.bodies()),
       IA_(model.bodies()),
       S_(model.bodies()),
@@ -43,8 +47,7 @@ bool ArticulatedBodySolver::factor(const ConstVectorRef& q, double h) {
     U_[i].noalias() = IA_[i] * S_[i];
     if (n == 1) {
       // Revolute and prismatic joints, the common case: a scalar pivot.
-      const double d =
-          S_[i].col(0).dot(U_[i].col(0)) + h * model_.damping[i] + h * h * model_.stiffness[i];
+      const double d = S_[i].col(0).dot(U_[i].col(0)) + h * damping_[i] + h * h * stiffness_[i];
       if (!(d > 0.0)) {
         ok = false;
         continue;

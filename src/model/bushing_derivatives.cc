@@ -71,8 +71,8 @@ BushingDerivatives::BushingDerivatives(const ArticulatedSystem& system)
                                system.dimensions().nq, true)),
       forest_D_(forest_pattern(system.tree(), q_offset_, v_offset_, system.dimensions().nv,
                                system.dimensions().nq, false)),
-      forest_(system.tree(), system.model().inertia, system.options().gravity,
-              system.options().joint_forces, forest_K_, forest_D_) {
+      forest_(system.tree(), system.model().inertia, system.options().gravity, forest_K_,
+              forest_D_) {
   if (bushings_.empty()) {
     throw std::invalid_argument("BushingDerivatives: '" + system.name() + "' has no bushings");
   }

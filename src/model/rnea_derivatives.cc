@@ -60,17 +60,13 @@ int translation_coordinates(JointType type) {
 }  // namespace
 
 RneaDerivatives::RneaDerivatives(const RigidTree& tree, std::vector<SpatialInertia> inertias,
-                                 const Eigen::Vector3d& gravity,
-                                 const std::vector<JointForce>& joint_forces,
-                                 const SparseMatrix& K_pattern, const SparseMatrix& D_pattern)
+                                 const Eigen::Vector3d& gravity, const SparseMatrix& K_pattern,
+                                 const SparseMatrix& D_pattern)
     : bodies_(tree.bodies), inertia_(std::move(inertias)) {
   const int nb = static_cast<int>(bodies_.size());
   const std::string who = "RneaDerivatives ('" + tree.name + "'): ";
   if (static_cast<int>(inertia_.size()) != nb) {
     throw std::invalid_argument(who + "one spatial inertia per body expected");
-  }
-  if (!joint_forces.empty() && static_cast<int>(joint_forces.size()) != nb) {
-    throw std::invalid_argument(who + "joint forces must be empty or one per body");
   }
   world_acceleration_ << 0.0, 0.0, 0.0, -gravity;
   for (int i = 0; i < nb; ++i) {
@@ -86,15 +82,6 @@ RneaDerivatives::RneaDerivatives(const RigidTree& tree, std::vector<SpatialInert
     nv_ += nvi;
     for (int k = 0; k < nqi; ++k) q_translates_.push_back(k < translating);
     for (int k = 0; k < nvi; ++k) v_translates_.push_back(k < translating);
-    // As ArticulatedSystem::evaluate_forces: springs and dampers act on 1-DOF
-    // joints only.
-    double k = 0.0, c = 0.0;
-    if (nvi == 1) {
-      c = b.damping + (joint_forces.empty() ? 0.0 : joint_forces[i].damping);
-      k = joint_forces.empty() ? 0.0 : joint_forces[i].stiffness;
-    }
-    stiffness_.push_back(k);
-    damping_.push_back(c);
   }
 
   // Every body's related bodies (ancestors, itself, descendants) in ascending
@@ -299,7 +286,7 @@ void RneaDerivatives::write_values(SparseMatrix* K, SparseMatrix* D) const {
   // pairs of the joint are like a descendant's row.
   using Column = Eigen::Map<Eigen::VectorXd>;
   auto write_column = [&](int body, const auto& force_derivative, const auto& motion_derivative,
-                          bool column_translates, double diagonal, double* out) {
+                          bool column_translates, double* out) {
     for (int r = run_begin_[body]; r < run_begin_[body + 1]; ++r) {
       const Run& run = runs_[r];
       Column values(out, run.rows);
@@ -318,7 +305,6 @@ void RneaDerivatives::write_values(SparseMatrix* K, SparseMatrix* D) const {
                             ? -J_.col(row).dot(force_derivative)
                             : -row_products_.col(row).dot(motion_derivative);
           }
-          if (run.rows == 1) values[0] -= diagonal;
           break;
       }
       out += run.rows;
@@ -329,11 +315,11 @@ void RneaDerivatives::write_values(SparseMatrix* K, SparseMatrix* D) const {
   for (int j = 0; j < static_cast<int>(bodies_.size()); ++j) {
     const int qo = q_offset_[j], vo = v_offset_[j];
     for (int c = qo; c < qo + joint_nq(bodies_[j].type); ++c) {
-      write_column(j, force_dq_.col(c), motion_dq_.col(c), q_translates_[c], stiffness_[j],
+      write_column(j, force_dq_.col(c), motion_dq_.col(c), q_translates_[c],
                    k_values + K->outerIndexPtr()[c]);
     }
     for (int l = vo; l < vo + joint_nv(bodies_[j].type); ++l) {
-      write_column(j, force_dv_.col(l), motion_dv_.col(l), v_translates_[l], damping_[j],
+      write_column(j, force_dv_.col(l), motion_dv_.col(l), v_translates_[l],
                    d_values + D->outerIndexPtr()[l]);
     }
   }
@@ -359,9 +345,8 @@ RneaDerivatives make_rnea_derivatives(const ArticulatedSystem& system) {
                                 "' has bushings (compliant formulation)");
   }
   const ForceJacobians& pattern = system.jacobian_pattern();
-  return RneaDerivatives(system.tree(), system.model().inertia, o.gravity,
-                         system.combined_joint_forces(),
-                         pattern.dF_dq, pattern.dF_dv);
+  return RneaDerivatives(system.tree(), system.model().inertia, o.gravity, pattern.dF_dq,
+                         pattern.dF_dv);
 }
 
 }  // namespace stiffsim

@@ -86,21 +86,30 @@ MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string&
     problem.joints.push_back(body.joint);
     problem.initial_q.push_back(options.initial_q[qo]);
     problem.initial_v.push_back(options.initial_v[vo]);
-    // The model's joint spring includes a drive's kp and kd; a drive with a
-    // constant target p adds kp p, which moves the spring's rest to
-    // (k rest + kp p) / (k + kp). A moving target would need MuJoCo's
-    // actuators and controls, which the peer does not set.
-    double rest = model.rest[b];
-    for (const JointDrive& dr : options.drives) {
-      if (dr.body != b || dr.kp == 0.0) continue;
-      if (!dr.target.is_constant())
+    // MuJoCo's joint has one spring and one damper: the joint's spring
+    // element and a drive on it add up. A drive with a constant target p
+    // adds kp p, which moves the spring's rest to (k rest + kp p) / (k + kp).
+    // A moving target would need MuJoCo's actuators and controls, which the
+    // peer does not set.
+    double stiffness = 0.0, damping = 0.0, moment = 0.0;  // moment: sum of k rest
+    for (const JointSpringElement& e : system.joint_springs().elements) {
+      if (e.body() != b) continue;
+      stiffness += e.stiffness();
+      damping += e.damping();
+      moment += e.stiffness() * e.rest();
+    }
+    for (const JointDriveElement& e : system.drives().elements) {
+      if (e.body() != b) continue;
+      if (!e.target().is_constant() && (e.stiffness() != 0.0 || e.damping() != 0.0))
         throw std::invalid_argument("MuJoCo peer: joint '" + body.joint + "' of '" +
                                     system.name() + "' has a drive with a moving target");
-      rest += dr.kp * dr.target.value(0.0) / model.stiffness[b];
+      stiffness += e.stiffness();
+      damping += e.damping();
+      moment += e.stiffness() * e.target().value(0.0);
     }
-    problem.stiffness.push_back(model.stiffness[b]);
-    problem.rest.push_back(rest);
-    problem.damping.push_back(model.damping[b]);
+    problem.stiffness.push_back(stiffness);
+    problem.rest.push_back(stiffness > 0.0 ? moment / stiffness : 0.0);
+    problem.damping.push_back(damping);
   }
   return problem;
 }

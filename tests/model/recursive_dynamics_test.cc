@@ -37,6 +37,9 @@ std::vector<std::unique_ptr<ArticulatedSystem>> systems_under_test() {
   ArticulatedOptions chain;
   chain.joint_forces.resize(12);
   for (int i = 0; i < 12; ++i) chain.joint_forces[i] = JointForce{100.0 * (i + 1), 0.1, 0.3 * i};
+  // A drive on a joint that also has a spring: two elements on one pivot.
+  chain.drives.push_back(
+      JointDrive{3, 500.0, 4.0, ScalarPath::sinusoid(0.1, 0.3, 2.0, 0.0, "drive")});
   out.push_back(std::make_unique<ArticulatedSystem>(serial_chain(12), chain));
   out.push_back(std::make_unique<ArticulatedSystem>(branched_tree(false), ArticulatedOptions{}));
   out.push_back(std::make_unique<ArticulatedSystem>(branched_tree(true), ArticulatedOptions{}));
@@ -50,16 +53,26 @@ TEST(ArticulatedBodySolver, SolvesTheMassMatrixPlusJointTerms) {
   for (const auto& owned : systems_under_test()) {
     const ArticulatedSystem& system = *owned;
     const ArticulatedModel& model = system.model();
-    ArticulatedBodySolver solver(model);
+    ArticulatedBodySolver solver(model, system.pivot_stiffness(), system.pivot_damping());
     for (unsigned seed = 1; seed <= 3; ++seed) {
       Eigen::VectorXd q, v;
       random_state(system, seed + 10 * index, &q, &v);
       const double h = 1e-2 * seed;
       Eigen::MatrixXd W = dense_mass(system, q);
+      // The joint terms from the description itself: the URDF's damping,
+      // the scene's springs and dampers, the drives' gains.
+      const ArticulatedOptions& o = system.options();
       for (int i = 0; i < model.bodies(); ++i) {
         if (joint_nv(model.tree.bodies[i].type) != 1) continue;
         const int k = model.v_offset[i];
-        W(k, k) += h * model.damping[i] + h * h * model.stiffness[i];
+        W(k, k) += h * model.tree.bodies[i].damping;
+        if (!o.joint_forces.empty()) {
+          W(k, k) += h * o.joint_forces[i].damping + h * h * o.joint_forces[i].stiffness;
+        }
+      }
+      for (const JointDrive& dr : o.drives) {
+        const int k = model.v_offset[dr.body];
+        W(k, k) += h * dr.kd + h * h * dr.kp;
       }
       ASSERT_TRUE(solver.factor(q, h));
       const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(model.nv, -1.0, 2.0);
@@ -80,7 +93,7 @@ TEST(ArticulatedBodySolver, ReportsASingularMassMatrix) {
   ArticulatedOptions options;
   EXPECT_THROW(ArticulatedSystem(tree, options), InputError);
   ArticulatedSystem good(serial_chain(3), options);
-  ArticulatedBodySolver solver(good.model());
+  ArticulatedBodySolver solver(good.model(), good.pivot_stiffness(), good.pivot_damping());
   EXPECT_TRUE(solver.factor(Eigen::VectorXd::Zero(3), 0.0));
   EXPECT_GT(solver.pivot_ratio(), 1e-6);
 }

@@ -76,14 +76,15 @@ struct Jacobians {
   ForceJacobians analytic, automatic;
 };
 
+// The analytic Jacobians are the system's: the recursion's terms plus its
+// force elements' (joint springs, dampers, drives, bushings).
 Jacobians both_jacobians(const ArticulatedSystem& sys, const RandomState& s,
                          bool with_acceleration) {
-  RneaDerivatives rnea = make_rnea_derivatives(sys);
   JacobianRequest request;
   if (with_acceleration) request.acceleration = s.a.data();
   Jacobians J{sys.jacobian_pattern(), sys.jacobian_pattern()};
   sys.automatic_force_jacobians(0.0, s.q, s.v, Eigen::VectorXd(), request, &J.automatic);
-  rnea.compute(s.q, s.v, request.acceleration, &J.analytic.dF_dq, &J.analytic.dF_dv);
+  sys.force_jacobians(0.0, s.q, s.v, Eigen::VectorXd(), request, &J.analytic);
   return J;
 }
 
@@ -252,7 +253,7 @@ TEST(RneaDerivatives, RejectsAPatternThatIsNotTheTrees) {
   diagonal.add_diagonal(0, 3);
   const SparseMatrix P = diagonal.build();
   const RigidTree tree = make_chain_tree(3);
-  EXPECT_THROW(RneaDerivatives(tree, body_inertias(tree), Eigen::Vector3d(0, 0, -9.81), {}, P,
+  EXPECT_THROW(RneaDerivatives(tree, body_inertias(tree), Eigen::Vector3d(0, 0, -9.81), P,
                                sys.jacobian_pattern().dF_dv),
                std::invalid_argument);
 }

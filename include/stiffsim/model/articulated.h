@@ -29,6 +29,8 @@
 #include "stiffsim/model/articulated_data.h"
 #include "stiffsim/model/articulated_model.h"
 #include "stiffsim/model/bushing.h"
+#include "stiffsim/model/generalized_element.h"
+#include "stiffsim/model/joint_elements.h"
 #include "stiffsim/model/path.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "stiffsim/model/spatial.h"
@@ -150,13 +152,18 @@ class ArticulatedSystem : public System {
   const RigidTree& tree() const { return model_.tree; }
   const ArticulatedModel& model() const { return model_; }
   const ArticulatedOptions& options() const { return options_; }
-  // The joint springs and dampers with the drives' kp and kd added (what
-  // the derivatives and the Newton matrix see); empty when options() has
-  // none and there are no drives.
-  const std::vector<JointForce>& combined_joint_forces() const { return combined_joint_forces_; }
-  // The drives' state-independent torques kp p(t) + kd p'(t) added into F.
-  // energy() counts each drive's spring about its target at s.t.
-  void add_drive_torques(double t, Eigen::Ref<Eigen::VectorXd> F) const;
+  // The force elements (generalized_element.h): every 1-DOF joint's spring
+  // and damper (the URDF's damping plus the scene's spring and damper),
+  // the drives, the bushings.
+  const GeneralizedElementSet<JointSpringElement>& joint_springs() const {
+    return elements_.joint_springs;
+  }
+  const GeneralizedElementSet<JointDriveElement>& drives() const { return elements_.drives; }
+  // Per body, the joint-local elements' stiffness and damping on its joint
+  // (zero for joints with more than one coordinate): what the
+  // articulated-body recursion folds into its pivots.
+  const std::vector<double>& pivot_stiffness() const { return pivot_stiffness_; }
+  const std::vector<double>& pivot_damping() const { return pivot_damping_; }
   // Where the root motion has moved the tree's base at t, and its velocity
   // (zero without one).
   Eigen::Vector3d root_displacement(double t) const;
@@ -185,14 +192,32 @@ class ArticulatedSystem : public System {
   // `data` as this system's (it must have made it).
   struct Data;
   Data& own(SystemData& data) const;
-  // F (or F - M a) into data->F: the inverse dynamics and the bushings.
+  // F (or F - M a) into data->F: the inverse dynamics, the bushings and
+  // the force elements.
   template <typename T, typename Positions, typename Velocities>
   void generalized_forces(double t, const Positions& q, const Velocities& v,
                           const double* acceleration, ArticulatedData<T>* data) const;
   void exact_jacobians(Data& data, double t, const ConstVectorRef& q, const ConstVectorRef& v,
                        const double* acceleration, ForceJacobians* J) const;
+  // Adds the force elements' K and D into J (after the recursion's terms).
+  void add_element_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                             ForceJacobians* J) const;
   // Gravity as the world's upward acceleration, less the root's at t.
   Vec6<double> world_acceleration_at(double t) const;
+
+  // One set per element type; the loops over forces, Jacobians and energy
+  // go through for_each_element_set(), so a new element type is one line
+  // there. kElementTypes indexes Patterns::element_slots.
+  struct Elements {
+    GeneralizedElementSet<JointSpringElement> joint_springs;
+    GeneralizedElementSet<JointDriveElement> drives;
+  };
+  static constexpr int kElementTypes = 2;
+  template <typename Fn>
+  void for_each_element_set(Fn&& fn) const {
+    fn(elements_.joint_springs, 0);
+    fn(elements_.drives, 1);
+  }
 
   struct Patterns {
     SparseMatrix mass;
@@ -200,6 +225,7 @@ class ArticulatedSystem : public System {
     // Value slots of M in the order the composite rigid body algorithm
     // produces its blocks (see mass_matrix()).
     std::vector<int> mass_slots;
+    std::array<ElementSlots, kElementTypes> element_slots;
     std::vector<int> column_colour;  // over (q, v)
     int colours = 0, jacobian_passes = 0;
   };
@@ -207,7 +233,8 @@ class ArticulatedSystem : public System {
 
   ArticulatedModel model_;
   ArticulatedOptions options_;
-  std::vector<JointForce> combined_joint_forces_;
+  Elements elements_;
+  std::vector<double> pivot_stiffness_, pivot_damping_;
   Dimensions dims_;
   SparseMatrix velocity_map_pattern_;
   bool constant_mass_ = false;

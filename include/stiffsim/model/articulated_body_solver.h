@@ -21,8 +21,10 @@ namespace stiffsim {
 
 class ArticulatedBodySolver : public StructuredNewtonMatrix {
  public:
-  // The model must outlive the solver.
-  explicit ArticulatedBodySolver(const ArticulatedModel& model);
+  // The model must outlive the solver. `stiffness` and `damping` per body:
+  // the joint-local force elements' (ArticulatedSystem::pivot_stiffness()).
+  ArticulatedBodySolver(const ArticulatedModel& model, std::vector<double> stiffness,
+                        std::vector<double> damping);
 
   // (M(q) + h D_J + h^2 K_J): d_i = h damping_i + h^2 stiffness_i.
   bool factor(const ConstVectorRef& q, double h) override;
@@ -37,6 +39,7 @@ class ArticulatedBodySolver : public StructuredNewtonMatrix {
   using Block = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
   using Column = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
   const ArticulatedModel& model_;
+  std::vector<double> stiffness_, damping_;
   std::vector<Eigen::Matrix<double, 6, 6>> X_, IA_;  // parent-to-body motion transform; I^A
   std::vector<MotionSubspace<double>> S_, U_, UD_;   // S; U = I^A S; U D^-1
   std::vector<Block> Dinv_;                          // inverse pivot blocks (at most 6 x 6)

@@ -1,8 +1,9 @@
 #pragma once
 // The immutable description of an exact (reduced-coordinate) articulated
 // tree that the recursive algorithms read: the tree, each body's spatial
-// inertia, where its joint's coordinates sit in q and v, gravity and the
-// joint-space springs and dampers. Every evaluation writes into a separate
+// inertia, where its joint's coordinates sit in q and v, and gravity (the
+// joint springs, dampers and drives are the system's force elements,
+// joint_elements.h). Every evaluation writes into a separate
 // workspace (ArticulatedData, articulated_data.h), created once; the model
 // never changes after construction (the split of a model and its data, as in
 // MuJoCo's mjModel/mjData and Pinocchio's Model/Data).
@@ -24,9 +25,6 @@ struct ArticulatedModel {
   int nq = 0, nv = 0;
   // Gravity as an upward acceleration of the world (angular part first).
   Vec6<double> world_acceleration = Vec6<double>::Zero();
-  // Per body; nonzero only on 1-DOF joints: tau = -stiffness (q - rest)
-  // - damping q_dot, damping being the URDF's plus the scene's.
-  std::vector<double> stiffness, rest, damping;
   bool has_floating = false;
   // Revolute joints: the body's rotation in its parent is
   // P (I + sin(q) K + (1 - cos(q)) K^2) for placement rotation P and the

@@ -1,9 +1,11 @@
 #pragma once
 // The recursive Newton-Euler algorithm on an ArticulatedModel (Featherstone
 // 2008, table 5.1), writing into an ArticulatedData workspace:
-//   F = tau_joint(q, v) - (M(q) a + C(q, v) + g(q)),
-// the generalized forces of MODELS.md less the inertial forces of the joint
-// accelerations a (a = 0 when `acceleration` is null: F itself). With
+//   F = -(M(q) a + C(q, v) + g(q)),
+// the rigid bodies' share of the generalized forces of MODELS.md less the
+// inertial forces of the joint accelerations a (a = 0 when `acceleration` is
+// null); the system adds its force elements' (joint springs, dampers,
+// drives, bushings: generalized_element.h). With
 // a = (v - v_n) / h, -h F is the velocity-implicit residual M(q)(v - v_n) - h F
 // in one O(n) pass, with no mass matrix formed. Templated on the scalar for
 // automatic differentiation.
@@ -77,13 +79,6 @@ void inverse_dynamics(const ArticulatedModel& model, const Positions& q, const V
       d.F.segment(vo, nv) = -tau;
     }
     if (b.parent >= 0) d.f[b.parent] += force_to_parent<T>(d.pose[i], d.f[i]);
-    if (nv == 1) {
-      T& Fi = d.F[vo];
-      Fi -= T(model.damping[i]) * v[vo];
-      if (model.stiffness[i] != 0.0) {
-        Fi -= T(model.stiffness[i]) * (q[model.q_offset[i]] - T(model.rest[i]));
-      }
-    }
   }
 }
 

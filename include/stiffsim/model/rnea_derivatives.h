@@ -1,7 +1,8 @@
 #pragma once
 // Analytic derivatives of the recursive Newton-Euler algorithm for an exact
-// (reduced-coordinate) tree: K = dF/dq and D = dF/dv of ArticulatedSystem's
-// F = -tau(q, v, a) + joint springs and dampers, by one forward and one
+// (reduced-coordinate) tree: K = dF/dq and D = dF/dv of the rigid bodies'
+// share F = -tau(q, v, a) of ArticulatedSystem's forces (its force elements,
+// generalized_element.h, add their own), by one forward and one
 // backward sweep and then one dot product (or two) per entry, O(n d) for n
 // bodies of depth d (Carpentier & Mansard, "Analytical Derivatives of Rigid
 // Body Dynamics Algorithms", RSS 2018).
@@ -37,18 +38,17 @@ namespace stiffsim {
 
 class RneaDerivatives {
  public:
-  // `inertias` per body (body frame); `joint_forces` per body or empty
-  // (ArticulatedOptions::joint_forces), beside each TreeBody's own damping.
+  // `inertias` per body (body frame).
   // K_pattern (nv x nq) and D_pattern (nv x nv) must be compressed and hold
   // exactly the entries of bodies on one root path, as
   // ArticulatedSystem::jacobian_pattern() of a tree without bushings does:
   // compute() then writes their values in storage order, without a slot
   // table. Throws std::invalid_argument otherwise.
   RneaDerivatives(const RigidTree& tree, std::vector<SpatialInertia> inertias,
-                  const Eigen::Vector3d& gravity, const std::vector<JointForce>& joint_forces,
-                  const SparseMatrix& K_pattern, const SparseMatrix& D_pattern);
+                  const Eigen::Vector3d& gravity, const SparseMatrix& K_pattern,
+                  const SparseMatrix& D_pattern);
 
-  // K = dF/dq and D = dF/dv at (q, v), F = -tau + joint forces; with
+  // K = dF/dq and D = dF/dv at (q, v), F = -tau; with
   // `acceleration` (nv values, may be null) the derivatives of F - M(q) a at
   // that fixed a. K and D must have the constructor's patterns; only their
   // values are written. Allocates nothing.
@@ -79,8 +79,7 @@ class RneaDerivatives {
   // --- Model (fixed at construction). ---
   std::vector<TreeBody> bodies_;
   std::vector<SpatialInertia> inertia_;
-  Vec6<double> world_acceleration_;          // gravity as an upward acceleration of the world
-  std::vector<double> stiffness_, damping_;  // per body (1-DOF joints; else 0)
+  Vec6<double> world_acceleration_;  // gravity as an upward acceleration of the world
   int nq_ = 0, nv_ = 0;
   std::vector<int> q_offset_, v_offset_;
   // Columns (per coordinate) of the translation part of a joint: they follow
@@ -108,8 +107,8 @@ class RneaDerivatives {
   Eigen::Matrix<double, 12, Eigen::Dynamic> motion_dq_;
 };
 
-// The derivatives of `system`'s forces in the exact formulation (its tree,
-// inertias, gravity, joint forces and Jacobian patterns). Throws
+// The derivatives of the rigid bodies' share of `system`'s forces in the
+// exact formulation (its tree, inertias, gravity and Jacobian patterns). Throws
 // std::invalid_argument for a system with bushings.
 RneaDerivatives make_rnea_derivatives(const ArticulatedSystem& system);
 
