@@ -10,8 +10,8 @@
 #include "stiffsim/linalg/column_colouring.h"
 #include "stiffsim/model/articulated_body_solver.h"
 #include "stiffsim/model/bushing.h"
-#include "stiffsim/model/bushing_derivatives.h"
 #include "stiffsim/model/composite_rigid_body.h"
+#include "stiffsim/model/forest_derivatives.h"
 #include "stiffsim/model/forward_kinematics.h"
 #include "stiffsim/model/inverse_dynamics.h"
 #include "stiffsim/model/joints.h"
@@ -59,7 +59,7 @@ struct ArticulatedSystem::Data : SystemData {
   // a run on the articulated-body recursion none.
   std::unique_ptr<DualWorkspace> dual;
   std::unique_ptr<RneaDerivatives> derivatives;
-  std::unique_ptr<BushingDerivatives> bushing_derivatives;
+  std::unique_ptr<ForestDerivatives> forest_derivatives;
 };
 
 std::unique_ptr<SystemData> ArticulatedSystem::make_data() const {
@@ -165,6 +165,10 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
   for (const JointDrive& dr : options_.drives) {
     elements_.drives.elements.emplace_back(dr.body, model_.q_offset[dr.body],
                                            model_.v_offset[dr.body], dr.kp, dr.kd, dr.target);
+  }
+  for (const Bushing& bu : options_.bushings) {
+    elements_.bushings.elements.emplace_back(bu,
+                                             bushing_offsets(bu, model_.q_offset, model_.v_offset));
   }
   for_each_element_set([this](const auto& set, int) {
     for (const auto& e : set.elements) {
@@ -282,10 +286,6 @@ const ArticulatedSystem::Patterns& ArticulatedSystem::patterns() const {
         add_block(M, model_.v_offset[i], ni, model_.v_offset[j], nj);
         add_block(M, model_.v_offset[j], nj, model_.v_offset[i], ni);
       }
-    }
-    for (const Bushing& bu : options_.bushings) {
-      if (bu.parent >= 0) add_pair(bu.parent, bu.child);
-      add_pair(bu.child, bu.child);
     }
     for_each_element_set([&](const auto& set, int) {
       set.add_to_patterns([&](int r, int c) { K.add(r, c); }, [&](int r, int c) { D.add(r, c); });
@@ -431,9 +431,6 @@ void ArticulatedSystem::generalized_forces(double t, const Positions& q, const V
                                            ArticulatedData<T>* data) const {
   data->world_acceleration = world_acceleration_at(t);
   inverse_dynamics<T>(model_, q, v, acceleration, data);
-  for (const Bushing& bu : options_.bushings) {
-    add_bushing_forces<T>(bu, q, v, model_.q_offset, model_.v_offset, &data->F);
-  }
   for_each_element_set(
       [&](const auto& set, int) { set.template add_forces<T>(t, q, v, &data->F); });
 }
@@ -511,8 +508,8 @@ void ArticulatedSystem::force_jacobians(SystemData& data, double t, const ConstV
   (void)z;
   Data& d = own(data);
   if (!options_.bushings.empty()) {
-    if (!d.bushing_derivatives) d.bushing_derivatives = std::make_unique<BushingDerivatives>(*this);
-    d.bushing_derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
+    if (!d.forest_derivatives) d.forest_derivatives = std::make_unique<ForestDerivatives>(*this);
+    d.forest_derivatives->compute(q, v, request.acceleration, &J->dF_dq, &J->dF_dv);
     add_element_jacobians(t, q, v, J);
     J->approximated_terms = 0;
     return;
@@ -604,7 +601,6 @@ double ArticulatedSystem::energy(SystemData&, const State& s) const {
   for (int i = 0; i < static_cast<int>(world.size()); ++i) {
     e -= model_.inertia[i].mass * options_.gravity.dot(world[i].R * model_.inertia[i].com + world[i].p);
   }
-  for (const Bushing& bu : options_.bushings) e += bushing_energy(bu, q, v, model_.q_offset, model_.v_offset);
   for_each_element_set([&](const auto& set, int) { e += set.energy(s.t, q); });
   return e;
 }
@@ -732,7 +728,8 @@ void ArticulatedSystem::point_kinematics(double t, int body, const Eigen::Vector
 double ArticulatedSystem::bushing_coordinate(int k, const Eigen::VectorXd& q) const {
   const Bushing& bu = options_.bushings.at(k);
   const Eigen::VectorXd v = Eigen::VectorXd::Zero(dims_.nv);
-  const BushingFrames<double> fr = bushing_frames<double>(bu, q, v, model_.q_offset, model_.v_offset);
+  const BushingFrames<double> fr =
+      bushing_frames<double>(bu, q, v, bushing_offsets(bu, model_.q_offset, model_.v_offset));
   if (bu.type == JointType::kPrismatic) return fr.n.dot(fr.b.pose.p - fr.xJ);
   return bushing_angle<double>(bu, fr, nullptr);
 }

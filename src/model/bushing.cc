@@ -22,9 +22,26 @@ Eigen::Vector3d reference_direction(const Eigen::Vector3d& n) {
   return e1;
 }
 
-double bushing_energy(const Bushing& bu, const Eigen::VectorXd& q, const Eigen::VectorXd& rest,
-                      const std::vector<int>& qo, const std::vector<int>& vo) {
-  const BushingFrames<double> fr = bushing_frames<double>(bu, q, rest, qo, vo);
+BushingOffsets bushing_offsets(const Bushing& bu, const std::vector<int>& q_offset,
+                               const std::vector<int>& v_offset) {
+  BushingOffsets at;
+  if (bu.parent >= 0) {
+    at.parent_q = q_offset[bu.parent];
+    at.parent_v = v_offset[bu.parent];
+  }
+  at.child_q = q_offset[bu.child];
+  at.child_v = v_offset[bu.child];
+  return at;
+}
+
+double bushing_energy(const Bushing& bu, const Eigen::Ref<const Eigen::VectorXd>& q,
+                      const BushingOffsets& at) {
+  // Velocities do not enter the potential: the frames read a zero 12-vector.
+  const Eigen::Matrix<double, 12, 1> rest = Eigen::Matrix<double, 12, 1>::Zero();
+  BushingOffsets positions = at;
+  positions.parent_v = bu.parent >= 0 ? 0 : -1;
+  positions.child_v = 6;
+  const BushingFrames<double> fr = bushing_frames<double>(bu, q, rest, positions);
   const BushingProjector g = bushing_projector(bu.type);
   const Eigen::Vector3d d = fr.b.pose.p - fr.xJ;
   const double nd = fr.n.dot(d);

@@ -15,8 +15,8 @@
 #include <string>
 
 #include "articulated_fixtures.h"
-#include "stiffsim/model/bushing_derivatives.h"
 #include "stiffsim/model/compliant.h"
+#include "stiffsim/model/forest_derivatives.h"
 #include "stiffsim/model/urdf.h"
 
 // Not under AddressSanitizer, whose own malloc a replacement would shadow.
@@ -290,7 +290,7 @@ void expect_bushings_match_automatic_everywhere(const ArticulatedSystem& sys, un
 // others' errors in the relative difference.
 constexpr BushingParameters kSoftBushings{1e3, 2.0, 1e2, 0.3};
 
-TEST(BushingDerivatives, CompliantChainsMatchAutomaticDifferentiation) {
+TEST(BushingElements, CompliantChainsMatchAutomaticDifferentiation) {
   // Revolute bushings, the first to the world; joint springs and dampers on
   // the atan2 angle.
   for (int links : {1, 2, 10}) {
@@ -304,7 +304,7 @@ TEST(BushingDerivatives, CompliantChainsMatchAutomaticDifferentiation) {
       *make_compliant(make_chain_tree(6), {}, BushingParameters{}), 920u);
 }
 
-TEST(BushingDerivatives, RevolutePrismaticAndPlanarBushingsMatch) {
+TEST(BushingElements, RevolutePrismaticAndPlanarBushingsMatch) {
   // branched_tree: revolute, prismatic (with its spring on the offset) and
   // planar joints, rotated placements, off-centre masses; on a floating base
   // the torso's bushing hangs from a free body instead of the world.
@@ -317,14 +317,14 @@ TEST(BushingDerivatives, RevolutePrismaticAndPlanarBushingsMatch) {
   }
 }
 
-TEST(BushingDerivatives, FreeBodyAmongBushingsMatches) {
+TEST(BushingElements, FreeBodyAmongBushingsMatches) {
   // mixed_tree's floating joint stays a free body without a bushing; its
   // children's bushings hang from it; URDF damping on every joint.
   expect_bushings_match_automatic_everywhere(
       *make_compliant(mixed_tree(), with_springs(mixed_tree()), kSoftBushings), 980u);
 }
 
-TEST(BushingDerivatives, QuaternionColumnsVanishAlongTheQuaternion) {
+TEST(BushingElements, QuaternionColumnsVanishAlongTheQuaternion) {
   const auto sys =
       make_compliant(branched_tree(true), with_springs(branched_tree(true)), kSoftBushings);
   const RandomState s = random_state(*sys, 990u, 1.1);
@@ -338,25 +338,31 @@ TEST(BushingDerivatives, QuaternionColumnsVanishAlongTheQuaternion) {
   }
 }
 
-TEST(BushingDerivatives, RejectsASystemWithoutBushings) {
+TEST(ForestDerivatives, RejectsASystemWithoutBushings) {
   const ArticulatedSystem sys(make_chain_tree(3), {});
-  EXPECT_THROW(BushingDerivatives{sys}, std::invalid_argument);
+  EXPECT_THROW(ForestDerivatives{sys}, std::invalid_argument);
 }
 
 #ifdef STIFFSIM_COUNTS_ALLOCATIONS
-TEST(BushingDerivatives, ComputeAllocatesNothing) {
+TEST(BushingElements, CompliantJacobiansAllocateNothing) {
   const RigidTree chain = make_chain_tree(30);
   const auto chain_sys = make_compliant(chain, with_springs(chain), kSoftBushings);
   const RigidTree tree = branched_tree(true);
   const auto tree_sys = make_compliant(tree, with_springs(tree), kSoftBushings);
   for (const ArticulatedSystem* sys : {chain_sys.get(), tree_sys.get()}) {
-    BushingDerivatives derivatives(*sys);
+    // The free bodies' derivatives and every bushing element's, through the
+    // system, once the data has made its derivative workspace.
+    const std::unique_ptr<SystemData> data = sys->make_data();
     const RandomState s = random_state(*sys, 995u, 1.02);
     ForceJacobians J = sys->jacobian_pattern();
+    JacobianRequest with_acceleration;
+    with_acceleration.acceleration = s.a.data();
+    const Eigen::VectorXd z;
+    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
     g_allocations = 0;
     g_count_allocations = true;
-    derivatives.compute(s.q, s.v, nullptr, &J.dF_dq, &J.dF_dv);
-    derivatives.compute(s.q, s.v, s.a.data(), &J.dF_dq, &J.dF_dv);
+    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
+    sys->force_jacobians(*data, 0.0, s.q, s.v, z, with_acceleration, &J);
     g_count_allocations = false;
     EXPECT_EQ(g_allocations.load(), 0) << sys->name();
   }

@@ -29,6 +29,7 @@
 #include "stiffsim/model/articulated_data.h"
 #include "stiffsim/model/articulated_model.h"
 #include "stiffsim/model/bushing.h"
+#include "stiffsim/model/bushing_element.h"
 #include "stiffsim/model/generalized_element.h"
 #include "stiffsim/model/joint_elements.h"
 #include "stiffsim/model/path.h"
@@ -126,8 +127,9 @@ class ArticulatedSystem : public System {
   const ForceJacobians& jacobian_pattern() const override { return patterns().jacobians; }
   // Exact K and D (complete: nothing dropped; request.acceleration
   // honoured), analytic: the recursive Newton-Euler derivatives
-  // (rnea_derivatives.h) for trees without bushings, O(n d); with bushings
-  // theirs and the free bodies' (bushing_derivatives.h), O(n).
+  // (rnea_derivatives.h) for trees without bushings, O(n d), the free
+  // bodies' (forest_derivatives.h) with them, O(n); then the force
+  // elements' (joint springs, drives, bushings), each O(1).
   // automatic_force_jacobians differentiates the same F by seeded forward
   // mode and checks both.
   void force_jacobians(SystemData&, double t, const ConstVectorRef& q, const ConstVectorRef& v,
@@ -159,6 +161,7 @@ class ArticulatedSystem : public System {
     return elements_.joint_springs;
   }
   const GeneralizedElementSet<JointDriveElement>& drives() const { return elements_.drives; }
+  const GeneralizedElementSet<BushingElement>& bushings() const { return elements_.bushings; }
   // Per body, the joint-local elements' stiffness and damping on its joint
   // (zero for joints with more than one coordinate): what the
   // articulated-body recursion folds into its pivots.
@@ -192,8 +195,8 @@ class ArticulatedSystem : public System {
   // `data` as this system's (it must have made it).
   struct Data;
   Data& own(SystemData& data) const;
-  // F (or F - M a) into data->F: the inverse dynamics, the bushings and
-  // the force elements.
+  // F (or F - M a) into data->F: the inverse dynamics, then the force
+  // elements.
   template <typename T, typename Positions, typename Velocities>
   void generalized_forces(double t, const Positions& q, const Velocities& v,
                           const double* acceleration, ArticulatedData<T>* data) const;
@@ -211,12 +214,14 @@ class ArticulatedSystem : public System {
   struct Elements {
     GeneralizedElementSet<JointSpringElement> joint_springs;
     GeneralizedElementSet<JointDriveElement> drives;
+    GeneralizedElementSet<BushingElement> bushings;
   };
-  static constexpr int kElementTypes = 2;
+  static constexpr int kElementTypes = 3;
   template <typename Fn>
   void for_each_element_set(Fn&& fn) const {
     fn(elements_.joint_springs, 0);
     fn(elements_.drives, 1);
+    fn(elements_.bushings, 2);
   }
 
   struct Patterns {

@@ -4,7 +4,7 @@
 // and the world. Its parameters, its generalized forces on the two bodies'
 // (q, v) slices and its potential; templated on the scalar, so the same code
 // gives F and, with dual numbers, the derivatives that check the analytic
-// ones (bushing_derivatives.h).
+// ones (bushing_element.h).
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -94,17 +94,26 @@ struct BushingFrames {
   Vec3<T> n;              // joint axis in the world (fixed to the parent)
 };
 
+// Where a bushing's two bodies' coordinates sit in q and v (the parent's -1
+// for the world).
+struct BushingOffsets {
+  int parent_q = -1, parent_v = -1, child_q = 0, child_v = 0;
+};
+// The offsets of `bu`'s bodies, from each body's q and v offsets.
+BushingOffsets bushing_offsets(const Bushing& bu, const std::vector<int>& q_offset,
+                               const std::vector<int>& v_offset);
+
 template <typename T, typename Q, typename V>
 BushingFrames<T> bushing_frames(const Bushing& bu, const Q& q, const V& v,
-                                const std::vector<int>& qo, const std::vector<int>& vo) {
+                                const BushingOffsets& at) {
   BushingFrames<T> fr;
   if (bu.parent >= 0) {
-    fr.a = free_body_state<T>(q, v, qo[bu.parent], vo[bu.parent]);
+    fr.a = free_body_state<T>(q, v, at.parent_q, at.parent_v);
   } else {
     fr.a.velocity.setZero();
     fr.a.omega.setZero();
   }
-  fr.b = free_body_state<T>(q, v, qo[bu.child], vo[bu.child]);
+  fr.b = free_body_state<T>(q, v, at.child_q, at.child_v);
   fr.RJ = fr.a.pose.R * bu.placement.linear().cast<T>();
   fr.xJ = fr.a.pose.p + fr.a.pose.R * bu.placement.translation().cast<T>();
   fr.n = fr.RJ * bu.axis.cast<T>();
@@ -131,9 +140,9 @@ T bushing_angle(const Bushing& bu, const BushingFrames<T>& fr, Vec3<T>* gradient
 
 // Adds bushing `bu`'s generalized forces to F.
 template <typename T, typename Q, typename V>
-void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::vector<int>& qo,
-                        const std::vector<int>& vo, Eigen::Matrix<T, Eigen::Dynamic, 1>* F) {
-  const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, qo, vo);
+void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const BushingOffsets& at,
+                        Eigen::Matrix<T, Eigen::Dynamic, 1>* F) {
+  const BushingFrames<T> fr = bushing_frames<T>(bu, q, v, at);
   const BushingProjector g = bushing_projector(bu.type);
   const Vec3<T>& n = fr.n;
   const Vec3<T> d = fr.b.pose.p - fr.xJ;
@@ -188,15 +197,14 @@ void add_bushing_forces(const Bushing& bu, const Q& q, const V& v, const std::ve
     m_parent += s_force * n.cross(d);
   }
 
-  apply_wrench<T>(fr.b, fr.b.pose.p, f, m_child, vo[bu.child], F);
+  apply_wrench<T>(fr.b, fr.b.pose.p, f, m_child, at.child_v, F);
   if (bu.parent >= 0) {
-    apply_wrench<T>(fr.a, fr.b.pose.p, Vec3<T>(-f), m_parent, vo[bu.parent], F);
+    apply_wrench<T>(fr.a, fr.b.pose.p, Vec3<T>(-f), m_parent, at.parent_v, F);
   }
 }
 
-// The potential of bushing `bu` (velocities do not enter it: `rest` is any
-// velocity vector of the right size).
-double bushing_energy(const Bushing& bu, const Eigen::VectorXd& q, const Eigen::VectorXd& rest,
-                      const std::vector<int>& qo, const std::vector<int>& vo);
+// The potential of bushing `bu`.
+double bushing_energy(const Bushing& bu, const Eigen::Ref<const Eigen::VectorXd>& q,
+                      const BushingOffsets& at);
 
 }  // namespace stiffsim

@@ -11,16 +11,19 @@
 //
 // An element type E provides (static dispatch: no virtual call per element
 // in the recursions' loops):
-//   std::vector<int> velocity_stencil() const;
-//   std::vector<int> position_stencil() const;
+//   Stencil velocity_stencil() const;   // runs of consecutive coordinates
+//   Stencil position_stencil() const;
 //   template <typename T, typename Q, typename V>      // double or dual numbers
 //   void add_force(double t, const Q& q, const V& v,
 //                  Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const;
 //   void add_jacobians(double t, const ConstVectorRef& q, const ConstVectorRef& v,
 //                      const int* k_slots, const int* d_slots,
 //                      double* K, double* D) const;
-//       // adds dF/dq of its stencil at K[k_slots[c * rows + r]] (r over the
-//       // velocity stencil, c over the position stencil), D likewise
+//       // adds dF/dq of velocity run r's k-th coordinate (row) and position
+//       // coordinate c of the stencil (column, counted over the runs) at
+//       // K[k_slots[c * runs + r] + k], D likewise: the rows of a run are
+//       // consecutive in each compressed column, so one slot per run and
+//       // column serves them all
 //   double energy(double t, const ConstVectorRef& q) const;
 //   static constexpr bool kJointLocal;
 // A joint-local element (a joint's spring, damper or drive) acts on the one
@@ -31,6 +34,7 @@
 // tree can hold.
 
 #include <Eigen/Core>
+#include <stdexcept>
 #include <vector>
 
 #include "stiffsim/linalg/sparse_pattern.h"
@@ -38,8 +42,15 @@
 
 namespace stiffsim {
 
-// Per element of a set, the value slots of its K block (velocity stencil x
-// position stencil) and D block (velocity stencil squared), column-major.
+// Consecutive coordinates first, first + 1, ..., first + count - 1.
+struct CoordinateRun {
+  int first = 0, count = 0;
+};
+using Stencil = std::vector<CoordinateRun>;
+
+// Per element of a set, the value slots of the first row of each velocity
+// run in each column of its stencil: K's columns are its position
+// coordinates, D's its velocity coordinates.
 // Kept with the system's lazily built patterns, apart from the elements: a
 // run that never assembles a Jacobian never builds them.
 struct ElementSlots {
@@ -55,26 +66,41 @@ struct GeneralizedElementSet {
   template <typename AddK, typename AddD>
   void add_to_patterns(AddK&& add_k, AddD&& add_d) const {
     for (const E& e : elements) {
-      const std::vector<int> rows = e.velocity_stencil(), q_cols = e.position_stencil();
-      for (int r : rows) {
-        for (int c : q_cols) add_k(r, c);
-        for (int c : rows) add_d(r, c);
+      const Stencil rows = e.velocity_stencil(), q_cols = e.position_stencil();
+      for (const CoordinateRun& rr : rows) {
+        for (int r = rr.first; r < rr.first + rr.count; ++r) {
+          for (const CoordinateRun& cr : q_cols)
+            for (int c = cr.first; c < cr.first + cr.count; ++c) add_k(r, c);
+          for (const CoordinateRun& cr : rows)
+            for (int c = cr.first; c < cr.first + cr.count; ++c) add_d(r, c);
+        }
       }
     }
   }
 
   // The slots in the finished patterns; throws std::out_of_range (slot_of)
-  // where an element's block is missing from them.
+  // where an element's block is missing from them, std::logic_error where a
+  // run's rows are not consecutive in a column.
   ElementSlots find_slots(const SparseMatrix& K, const SparseMatrix& D) const {
     ElementSlots slots;
+    auto add = [](const SparseMatrix& A, const Stencil& rows, const Stencil& cols,
+                  std::vector<int>* out) {
+      for (const CoordinateRun& cr : cols) {
+        for (int c = cr.first; c < cr.first + cr.count; ++c) {
+          for (const CoordinateRun& rr : rows) {
+            const int first = slot_of(A, rr.first, c);
+            if (slot_of(A, rr.first + rr.count - 1, c) != first + rr.count - 1) {
+              throw std::logic_error("GeneralizedElementSet: a run's rows are not consecutive");
+            }
+            out->push_back(first);
+          }
+        }
+      }
+    };
     for (const E& e : elements) {
-      const std::vector<int> rows = e.velocity_stencil(), q_cols = e.position_stencil();
-      std::vector<int>& ks = slots.k.emplace_back();
-      std::vector<int>& ds = slots.d.emplace_back();
-      for (int c : q_cols)
-        for (int r : rows) ks.push_back(slot_of(K, r, c));
-      for (int c : rows)
-        for (int r : rows) ds.push_back(slot_of(D, r, c));
+      const Stencil rows = e.velocity_stencil(), q_cols = e.position_stencil();
+      add(K, rows, q_cols, &slots.k.emplace_back());
+      add(D, rows, rows, &slots.d.emplace_back());
     }
     return slots;
   }

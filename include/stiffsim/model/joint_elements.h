@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <vector>
 
+#include "stiffsim/model/generalized_element.h"
 #include "stiffsim/model/path.h"
 #include "stiffsim/system.h"
 
@@ -22,8 +23,8 @@ class JointSpringElement {
   JointSpringElement(int body, int q_index, int v_index, double k, double rest, double c)
       : body_(body), q_(q_index), v_(v_index), k_(k), rest_(rest), c_(c) {}
 
-  std::vector<int> velocity_stencil() const { return {v_}; }
-  std::vector<int> position_stencil() const { return {q_}; }
+  Stencil velocity_stencil() const { return {{v_, 1}}; }
+  Stencil position_stencil() const { return {{q_, 1}}; }
   template <typename T, typename Q, typename V>
   void add_force(double, const Q& q, const V& v, Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const {
     (*F)[v_] -= T(c_) * v[v_];
@@ -60,8 +61,8 @@ class JointDriveElement {
   JointDriveElement(int body, int q_index, int v_index, double kp, double kd, ScalarPath target)
       : body_(body), q_(q_index), v_(v_index), kp_(kp), kd_(kd), target_(std::move(target)) {}
 
-  std::vector<int> velocity_stencil() const { return {v_}; }
-  std::vector<int> position_stencil() const { return {q_}; }
+  Stencil velocity_stencil() const { return {{v_, 1}}; }
+  Stencil position_stencil() const { return {{q_, 1}}; }
   template <typename T, typename Q, typename V>
   void add_force(double t, const Q& q, const V& v, Eigen::Matrix<T, Eigen::Dynamic, 1>* F) const {
     (*F)[v_] += T(kp_) * (T(target_.value(t)) - q[q_]) + T(kd_) * (T(target_.rate(t)) - v[v_]);

@@ -22,7 +22,8 @@
 //   body by w = 4 / |q|^2 N(q)^T dq (body frame; N the quaternion block of the
 //   velocity map), and K's quaternion columns are the tangent columns times
 //   that 3x4 map (zero along q itself), exactly what differentiating F gives.
-// Bushings (compliant formulation) are covered by bushing_derivatives.h.
+// Bushings (compliant formulation) are force elements (bushing_element.h);
+// the free bodies between them are covered by forest_derivatives.h.
 
 #include <Eigen/Core>
 #include <vector>

@@ -1,7 +1,6 @@
-#include "stiffsim/model/bushing_derivatives.h"
+#include "stiffsim/model/bushing_element.h"
 
 #include <cmath>
-#include <stdexcept>
 
 #include "stiffsim/model/joints.h"
 #include "stiffsim/model/quaternion.h"
@@ -43,79 +42,28 @@ BodyFrame body_frame(const ConstVectorRef& q, const ConstVectorRef& v, int qo, i
   return b;
 }
 
-// The pattern of the forest without bushings: each body with the bodies on
-// its root path (rows of one, columns of the other, both ways).
-SparseMatrix forest_pattern(const RigidTree& tree, const std::vector<int>& q_offset,
-                            const std::vector<int>& v_offset, int nv, int nq, bool positions) {
-  PatternBuilder B(nv, positions ? nq : nv);
-  const int nb = static_cast<int>(tree.bodies.size());
-  for (int i = 0; i < nb; ++i) {
-    for (int j = i; j >= 0; j = tree.bodies[j].parent) {
-      for (auto [r, c] : {std::pair{i, j}, std::pair{j, i}}) {
-        const JointType rt = tree.bodies[r].type, ct = tree.bodies[c].type;
-        B.add_block(v_offset[r], positions ? q_offset[c] : v_offset[c], joint_nv(rt),
-                    positions ? joint_nq(ct) : joint_nv(ct));
-      }
-    }
-  }
-  return B.build();
-}
-
 }  // namespace
 
-BushingDerivatives::BushingDerivatives(const ArticulatedSystem& system)
-    : bushings_(system.options().bushings),
-      q_offset_(system.model().q_offset),
-      v_offset_(system.model().v_offset),
-      forest_K_(forest_pattern(system.tree(), q_offset_, v_offset_, system.dimensions().nv,
-                               system.dimensions().nq, true)),
-      forest_D_(forest_pattern(system.tree(), q_offset_, v_offset_, system.dimensions().nv,
-                               system.dimensions().nq, false)),
-      forest_(system.tree(), system.model().inertia, system.options().gravity, forest_K_,
-              forest_D_) {
-  if (bushings_.empty()) {
-    throw std::invalid_argument("BushingDerivatives: '" + system.name() + "' has no bushings");
-  }
-  const ForceJacobians& pattern = system.jacobian_pattern();
-  forest_k_slots_ = slots_in(pattern.dF_dq, forest_K_);
-  forest_d_slots_ = slots_in(pattern.dF_dv, forest_D_);
-  for (const Bushing& bu : bushings_) {
-    BlockSlots s{};
-    const int body[2] = {bu.parent, bu.child};
-    for (int r = 0; r < 2; ++r) {
-      for (int c = 0; c < 2; ++c) {
-        if (body[r] < 0 || body[c] < 0) continue;
-        const int row = v_offset_[body[r]];
-        for (int j = 0; j < 7; ++j)
-          s.k[r][c][j] = slot_of(pattern.dF_dq, row, q_offset_[body[c]] + j);
-        for (int j = 0; j < 6; ++j)
-          s.d[r][c][j] = slot_of(pattern.dF_dv, row, v_offset_[body[c]] + j);
-      }
-    }
-    slots_.push_back(s);
-  }
+Stencil BushingElement::velocity_stencil() const {
+  if (at_.parent_v < 0) return {{at_.child_v, 6}};
+  return {{at_.parent_v, 6}, {at_.child_v, 6}};
 }
 
-void BushingDerivatives::compute(const ConstVectorRef& q, const ConstVectorRef& v,
-                                 const double* acceleration, SparseMatrix* K, SparseMatrix* D) {
-  forest_.compute(q, v, acceleration, &forest_K_, &forest_D_);
-  set_zero_keep_pattern(K);
-  set_zero_keep_pattern(D);
-  scatter_add(forest_K_, forest_k_slots_, 1.0, K);
-  scatter_add(forest_D_, forest_d_slots_, 1.0, D);
-  for (std::size_t k = 0; k < bushings_.size(); ++k)
-    add_bushing(bushings_[k], slots_[k], q, v, K, D);
+Stencil BushingElement::position_stencil() const {
+  if (at_.parent_q < 0) return {{at_.child_q, 7}};
+  return {{at_.parent_q, 7}, {at_.child_q, 7}};
 }
 
-void BushingDerivatives::add_bushing(const Bushing& bu, const BlockSlots& slots,
-                                     const ConstVectorRef& q, const ConstVectorRef& v,
-                                     SparseMatrix* K, SparseMatrix* D) const {
-  // The forces of add_bushing_forces (articulated.cc), term by term, each
+void BushingElement::add_jacobians(double, const ConstVectorRef& q, const ConstVectorRef& v,
+                                   const int* k_slots, const int* d_slots, double* K,
+                                   double* D) const {
+  const Bushing& bu = bushing_;
+  // The forces of add_bushing_forces (bushing.h), term by term, each
   // with its derivatives Jx (positions) and Jv (velocities).
   const bool has_parent = bu.parent >= 0;
   BodyFrame a;  // the world at rest when there is no parent
-  if (has_parent) a = body_frame(q, v, q_offset_[bu.parent], v_offset_[bu.parent]);
-  const BodyFrame b = body_frame(q, v, q_offset_[bu.child], v_offset_[bu.child]);
+  if (has_parent) a = body_frame(q, v, at_.parent_q, at_.parent_v);
+  const BodyFrame b = body_frame(q, v, at_.child_q, at_.child_v);
   const BushingProjector g = bushing_projector(bu.type);
   const Mat3d I = Mat3d::Identity();
 
@@ -264,8 +212,9 @@ void BushingDerivatives::add_bushing(const Bushing& bu, const BlockSlots& slots,
   const Jac* moment_x[2] = {&tp_x, &mc_x};
   const Jac* moment_v[2] = {&tp_v, &mc_v};
   const Vec3d moment[2] = {tau_parent, m_child};
-  double* k_values = K->valuePtr();
-  double* d_values = D->valuePtr();
+  // The stencil: velocity runs (parent, child) of 6, K's columns 7 per
+  // body, D's 6, the parent's absent for the world.
+  const int runs = has_parent ? 2 : 1;
   for (int row = has_parent ? 0 : 1; row < 2; ++row) {
     const Mat3d Rt = frames[row]->R.transpose();
     for (int column = has_parent ? 0 : 1; column < 2; ++column) {
@@ -287,12 +236,14 @@ void BushingDerivatives::add_bushing(const Bushing& bu, const BlockSlots& slots,
         Db.block<3, 3>(3 * part, 0) = out * Jv.block<3, 3>(0, xp);
         Db.block<3, 3>(3 * part, 3) = out * Jv.block<3, 3>(0, xr) * c.R;
       }
+      const int run = has_parent ? row : 0;
+      const int k0 = has_parent ? 7 * column : 0, d0 = has_parent ? 6 * column : 0;
       for (int j = 0; j < 7; ++j) {
-        double* dst = k_values + slots.k[row][column][j];
+        double* dst = K + k_slots[(k0 + j) * runs + run];
         for (int i = 0; i < 6; ++i) dst[i] += Kb(i, j);
       }
       for (int j = 0; j < 6; ++j) {
-        double* dst = d_values + slots.d[row][column][j];
+        double* dst = D + d_slots[(d0 + j) * runs + run];
         for (int i = 0; i < 6; ++i) dst[i] += Db(i, j);
       }
     }
