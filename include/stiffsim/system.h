@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/drawing.h"
 #include "stiffsim/linalg/sparse_pattern.h"
 #include "stiffsim/point_kinematics.h"
 #include "stiffsim/state.h"
@@ -184,6 +185,14 @@ class System {
   virtual void point_kinematics(double t, int element, const Eigen::Vector3d& local,
                                 const ConstVectorRef& q, const ConstVectorRef& v,
                                 PointKinematics* out) const;
+
+  // The system's picture at (t, q, v) (drawing.h) into *out; false, with
+  // *out untouched, for a system with no geometry (a pure ODE).
+  virtual bool draw(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+                    const DrawingRequest& request, ComponentDrawing* out) const {
+    (void)t, (void)q, (void)v, (void)request, (void)out;
+    return false;
+  }
 
   // Total energy (kinetic + potential) where defined, NaN otherwise.
   virtual double energy(SystemData&, const State& s) const {

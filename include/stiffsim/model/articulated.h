@@ -149,6 +149,19 @@ class ArticulatedSystem : public System {
   int point_dofs(int body) const override;
   void point_kinematics(double t, int body, const Eigen::Vector3d& local, const ConstVectorRef& q,
                         const ConstVectorRef& v, PointKinematics* out) const override;
+  // Exact or compliant: one point per body at its frame's origin (in body
+  // order), then one per joint anchored in the world (a root joint that is
+  // not floating, or a compliant bushing whose parent is the world) at the
+  // joint frame's origin, then one per leaf body whose centre of mass is
+  // off its origin, at origin + 2 (COM - origin): the far end of a uniform
+  // rod hung from its joint, so the last link of a chain is drawn too, then
+  // one per request.hooks point on a body away from its origin (a box hung
+  // by a corner reaches out to the corner); a base moved by a root motion
+  // carries them all. Segments: each joint's parent point (body origin or
+  // world anchor) to its child's origin, each leaf's origin to its tip and
+  // each body's origin to its attachment points.
+  bool draw(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+            const DrawingRequest& request, ComponentDrawing* out) const override;
 
   // --- For reports and tests. ---
   const RigidTree& tree() const { return model_.tree; }

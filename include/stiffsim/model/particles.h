@@ -98,6 +98,13 @@ class ParticleSystem : public System {
                         const ConstVectorRef& v, PointKinematics* out) const override;
   // Kinetic + gravitational + spring potential energy.
   double energy(SystemData&, const State& s) const override;
+  // One point per node in node order, free nodes from the state and pinned
+  // ones where their motion puts them at t (held by the world); segments
+  // are the edges of request.triangles when they are in range, else the
+  // springs between consecutive nodes (a rope's stretch springs, not its
+  // bend springs), else all springs.
+  bool draw(double t, const ConstVectorRef& q, const ConstVectorRef& v,
+            const DrawingRequest& request, ComponentDrawing* out) const override;
 
   const ParticleDescription& description() const { return desc_; }
   int node_count() const { return static_cast<int>(desc_.positions.size()); }
