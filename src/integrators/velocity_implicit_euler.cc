@@ -48,6 +48,7 @@ VelocityImplicitEuler::VelocityImplicitEuler(const System& system, IntegratorSet
 
 void VelocityImplicitEuler::do_initialize() {
   const Dimensions& d = dims_;
+  step_error_ = step_error_h_ = 0.0;
   residual_state_.resize(d.nx());
   energy_state_.x = Eigen::VectorXd::Zero(d.nx());
   dv_.resize(d.nv);
@@ -333,9 +334,27 @@ void VelocityImplicitEuler::evaluate_damping(double t, const Eigen::VectorXd& x)
 
 bool VelocityImplicitEuler::do_step(double h) {
   if (!estimating_error() && !extrapolating()) {
-    const Eigen::VectorXd& guess =
-        krylov_path() || structured() ? predictor(h, state_.x) : state_.x;
-    return solve_step(state_.t, h, state_.x, guess, &candidate_);
+    // Fixed steps without an estimate. The predictor extrapolates v with
+    // the last step's velocity change, which implicit Euler made
+    // h a(t_n), to v_n + h a(t_n); the step itself takes v_n + h a(t_n+1),
+    // so to leading order the result differs from the prediction by
+    // h^2 a', twice the step's local error h^2 a' / 2 (the exact
+    // v(t_n+1) = v_n + h a(t_n) + h^2 a' / 2 + ...). The last step's
+    // difference (scaled by h^2 to this step) sets this solve's Newton
+    // tolerance (use_step_error_tolerance).
+    const Eigen::VectorXd& predicted = predictor(h, state_.x);
+    const bool has_prediction = &predicted != &state_.x;
+    const double scale = step_error_h_ > 0.0 ? (h / step_error_h_) * (h / step_error_h_) : 0.0;
+    use_step_error_tolerance(has_prediction ? scale * step_error_ : 0.0);
+    const Eigen::VectorXd& guess = krylov_path() || structured() ? predicted : state_.x;
+    const bool solved = solve_step(state_.t, h, state_.x, guess, &candidate_);
+    if (solved && has_prediction) {
+      const int nq = dims_.nq, nv = dims_.nv;
+      step_error_ =
+          (candidate_.segment(nq, nv) - predicted.segment(nq, nv)).lpNorm<Eigen::Infinity>() / 2.0;
+      step_error_h_ = h;
+    }
+    return solved;
   }
   return step_doubling(h);
 }

@@ -67,6 +67,9 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   const double* mass_diagonal_ = nullptr;
   bool use_potential_merit_ = false;
   Eigen::VectorXd predicted_;  // predictor()'s result
+  // Fixed steps without an estimate: the last step's local error estimate
+  // |v - v_pred| / 2 (see do_step()) and the step it was taken with.
+  double step_error_ = 0.0, step_error_h_ = 0.0;
   double g_scale_ = 0.0;       // energy magnitude, for the round-off of G
   ForceJacobians merit_jacobians_;
   State energy_state_;
