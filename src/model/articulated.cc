@@ -148,6 +148,17 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
       }
     }
   }
+  for (const Bushing& bu : options_.bushings) {
+    for (int body : {bu.parent, bu.child}) {
+      if (body < -1 || body >= nb || (body >= 0 && !is_free_root(model_.tree.bodies[body])) ||
+          bu.child < 0) {
+        throw InputError(w + ": bushing '" + bu.name + "' must join free bodies");
+      }
+    }
+    if (bu.type == JointType::kFloating) {
+      throw InputError(w + ": bushing '" + bu.name + "' replaces a floating joint");
+    }
+  }
   // The force elements. A joint's spring and damper is one element (the
   // URDF's damping plus the scene's); a drive is another on the same
   // coordinate.
@@ -178,17 +189,6 @@ ArticulatedSystem::ArticulatedSystem(RigidTree tree, ArticulatedOptions options)
       }
     }
   });
-  for (const Bushing& bu : options_.bushings) {
-    for (int body : {bu.parent, bu.child}) {
-      if (body < -1 || body >= nb || (body >= 0 && !is_free_root(model_.tree.bodies[body])) ||
-          bu.child < 0) {
-        throw InputError(w + ": bushing '" + bu.name + "' must join free bodies");
-      }
-    }
-    if (bu.type == JointType::kFloating) {
-      throw InputError(w + ": bushing '" + bu.name + "' replaces a floating joint");
-    }
-  }
   if (options_.initial_q.size() == 0) {
     options_.initial_q = Eigen::VectorXd::Zero(dims_.nq);
     for (int i = 0; i < nb; ++i) {

@@ -386,6 +386,19 @@ TEST(RneaDerivatives, ComputeAllocatesNothing) {
     rnea.compute(s.q, s.v, s.a.data(), &J.dF_dq, &J.dF_dv);
     g_count_allocations = false;
     EXPECT_EQ(g_allocations.load(), 0) << sys->name();
+    // The system's analytic Jacobians (the recursion, then the joint
+    // springs' and drives' elements) once its data has made its workspace.
+    const std::unique_ptr<SystemData> data = sys->make_data();
+    JacobianRequest with_acceleration;
+    with_acceleration.acceleration = s.a.data();
+    const Eigen::VectorXd z;
+    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
+    g_allocations = 0;
+    g_count_allocations = true;
+    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
+    sys->force_jacobians(*data, 0.5, s.q, s.v, z, with_acceleration, &J);
+    g_count_allocations = false;
+    EXPECT_EQ(g_allocations.load(), 0) << sys->name() << " (system)";
   }
 }
 #endif

@@ -66,8 +66,9 @@ struct ImplicitSettings {
   double max_forcing = 0.1;
   bool reuse = true;  // false: fresh Jacobian and factorization every step attempt
   int max_newton_iterations = 10;
-  // Newton stops when eta |dx| <= kappa * accuracy (Hairer & Wanner IV.8);
-  // 0.05 is the middle of their recommended [0.01, 0.1].
+  // Newton stops when eta |dx| (or the residual) <= kappa * accuracy
+  // (Hairer & Wanner IV.8; see step_error_tolerance for fixed steps); 0.05
+  // is the middle of their recommended [0.01, 0.1].
   double newton_kappa = 0.05;
   // Iteration matrices may use the definite spring approximation
   // (JacobianRequest::definite) so CHOLMOD's LL^T keeps working.
@@ -110,11 +111,10 @@ class ImplicitIntegrator : public IntegratorBase {
   Convergence check_newton_convergence(int iteration, const Eigen::VectorXd& x,
                                        const Eigen::VectorXd& dx, double dx_norm,
                                        double last_dx_norm);
-  // kappa * accuracy, or below it for an extrapolating step (see
-  // step_doubling()).
-  double newton_tolerance() const { return newton_tolerance_; }
-  // Fixed steps without an error estimate: the next solves' tolerance from
-  // the step's estimated local error (weighted norm; 0 when unknown), as
+  // The Newton tolerance is kappa * accuracy, below it for an
+  // extrapolating step (extrapolation_newton_tolerance()), and for a fixed
+  // step without an error estimate set here from the step's estimated
+  // local error (weighted norm; 0 when unknown), as
   // ImplicitSettings::step_error_tolerance says.
   void use_step_error_tolerance(double local_error);
   // ... by at most this factor over kappa * accuracy. Beyond it a violent

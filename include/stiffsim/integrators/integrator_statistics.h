@@ -57,8 +57,9 @@ struct IntegratorStatistics {
   // solves that missed their tolerance within the iteration budget, and why
   // each factorization happened.
   long krylov_first_solves = 0;  // Newton solves that started on the Krylov path
-  // Fixed steps without an error estimate: solves whose Newton tolerance
-  // the step's own local error set (ImplicitSettings::step_error_tolerance).
+  // Fixed steps without an error estimate: step attempts (a halved step's
+  // retries included) whose Newton tolerance the step's own local error
+  // set (ImplicitSettings::step_error_tolerance).
   long newton_tolerance_from_step_error = 0;
   // ... and of those, solves narrowed back to kappa * accuracy because an
   // iterate gained energy (the energy guard judges roots, see newton()).

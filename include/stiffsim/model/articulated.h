@@ -4,8 +4,8 @@
 // - exact: the RigidTree in reduced coordinates. M(q) by the composite rigid
 //   body algorithm (composite_rigid_body.h), which touches only the pairs of
 //   bodies on one branch (the tree's branch sparsity is M's pattern);
-//   F = tau_joint - C(q, v) - g(q) by the recursive Newton-Euler algorithm
-//   (inverse_dynamics.h).
+//   F = -C(q, v) - g(q) by the recursive Newton-Euler algorithm
+//   (inverse_dynamics.h), plus the force elements' joint torques.
 // - compliant (make_compliant in compliant.h): a forest of free bodies, each
 //   with a floating joint to the world, held together by Bushings
 //   (bushing.h); M is block diagonal and K, D are block tridiagonal for a
@@ -42,10 +42,11 @@ namespace stiffsim {
 
 // A PD drive on a 1-DOF joint of the exact formulation:
 //   tau = kp (p(t) - q) + kd (p'(t) - q_dot),
-// p the target path (path.h), its rate the velocity target. Its stiffness
-// and damping enter K and D (and the articulated-body pivots) like a joint
-// spring's, so the drive is as implicit as the rest of the step; only
-// kp p(t) + kd p'(t), which no state changes, is evaluated explicitly.
+// p the target path (path.h), its rate the velocity target; the system
+// makes it a force element (JointDriveElement, joint_elements.h). Its
+// stiffness and damping enter K and D (and the articulated-body pivots)
+// like a joint spring's, so the drive is as implicit as the rest of the
+// step; only kp p(t) + kd p'(t), which no state changes, is explicit.
 struct JointDrive {
   int body = 0;  // the driven joint's body in the tree
   double kp = 0.0, kd = 0.0;
