@@ -63,7 +63,7 @@ struct RunOptions {
   std::string integrator;
   double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
   bool fixed_step = false, error_estimate = false;
-  std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve;
+  std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve, newton_tolerance;
   bool full_newton = false, no_reuse = false;
   std::string output, stats, vtk;
   std::vector<std::string> sets;
@@ -75,7 +75,7 @@ struct RunOptions {
               *fixed_step_option = nullptr, *error_estimate_option = nullptr,
               *jacobian_option = nullptr, *linear_solver_option = nullptr,
               *newton_form_option = nullptr, *error_estimator_option = nullptr,
-              *newton_solve_option = nullptr;
+              *newton_solve_option = nullptr, *newton_tolerance_option = nullptr;
 };
 
 void add_run_options(CLI::App* run, RunOptions* o) {
@@ -167,6 +167,14 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "auto's choice for VIE on trees of 250 or more joint velocities)")
           ->check(CLI::IsMember(newton_solve_names()))
           ->group(newton);
+  o->newton_tolerance_option =
+      run->add_option("--newton-tolerance", o->newton_tolerance,
+                      "What sets the Newton tolerance of VIE's fixed steps without "
+                      "--error-estimate: step-error (default: 0.05 times the larger of the "
+                      "accuracy and the step's own local error, at most 100 times the accuracy) "
+                      "or accuracy (0.05 times the accuracy, as under error control)")
+          ->check(CLI::IsMember(newton_tolerance_names()))
+          ->group(newton);
   run->add_flag("--full-newton", o->full_newton,
                 "Fresh Jacobian and factorization at every Newton iteration")
       ->group(newton);
@@ -220,6 +228,7 @@ RunOverrides overrides_from(const RunOptions& o) {
   if (o.newton_form_option->count() > 0) r.newton_form = o.newton_form;
   if (o.error_estimator_option->count() > 0) r.error_estimator = o.error_estimator;
   if (o.newton_solve_option->count() > 0) r.newton_solve = o.newton_solve;
+  if (o.newton_tolerance_option->count() > 0) r.newton_tolerance = o.newton_tolerance;
   r.full_newton = o.full_newton;
   r.no_reuse = o.no_reuse;
   return r;

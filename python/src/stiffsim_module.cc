@@ -352,6 +352,7 @@ PYBIND11_MODULE(_stiffsim, m) {
       .def_readwrite("newton_form", &RunOverrides::newton_form)
       .def_readwrite("error_estimator", &RunOverrides::error_estimator)
       .def_readwrite("newton_solve", &RunOverrides::newton_solve)
+      .def_readwrite("newton_tolerance", &RunOverrides::newton_tolerance)
       .def_readwrite("full_newton", &RunOverrides::full_newton)
       .def_readwrite("no_reuse", &RunOverrides::no_reuse);
 

@@ -47,6 +47,16 @@ std::string to_string(NewtonSolve solve) {
   return "?";
 }
 
+bool parse_newton_tolerance(const std::string& name) {
+  if (name == "step-error") return true;
+  if (name == "accuracy") return false;
+  throw InputError("unknown Newton tolerance '" + name + "' (expected step-error or accuracy)");
+}
+
+std::string newton_tolerance_name(bool step_error_tolerance) {
+  return step_error_tolerance ? "step-error" : "accuracy";
+}
+
 ImplicitErrorEstimate parse_error_estimator(const std::string& name) {
   if (name == "trapezoid") return ImplicitErrorEstimate::kTrapezoid;
   if (name == "doubling") return ImplicitErrorEstimate::kStepDoubling;

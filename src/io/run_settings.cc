@@ -50,6 +50,9 @@ RunSettings run_settings(const SceneConfig& config, const RunOverrides& o) {
   if (o.newton_form) s.implicit.newton_form = parse_newton_form(*o.newton_form);
   if (o.error_estimator) s.implicit.error_estimator = parse_error_estimator(*o.error_estimator);
   if (o.newton_solve) s.implicit.newton_solve = parse_newton_solve(*o.newton_solve);
+  if (o.newton_tolerance) {
+    s.implicit.step_error_tolerance = parse_newton_tolerance(*o.newton_tolerance);
+  }
   if (o.full_newton) s.implicit.full_newton = true;
   if (o.no_reuse) s.implicit.reuse = false;
   if (s.integrator.min_step > s.integrator.max_step) {

@@ -22,7 +22,8 @@ std::vector<std::string> simulation_keys() {
           "reuse",
           "definite_iteration_matrix",
           "error_estimator",
-          "newton_solve"};
+          "newton_solve",
+          "newton_tolerance"};
 }
 
 namespace {
@@ -87,6 +88,10 @@ void read_simulation(const Section& top, SceneConfig* config) {
   if (s.has("newton_solve")) {
     implicit.newton_solve =
         parse_newton_solve(s.choice_or("newton_solve", newton_solve_names(), ""));
+  }
+  if (s.has("newton_tolerance")) {
+    implicit.step_error_tolerance =
+        parse_newton_tolerance(s.choice_or("newton_tolerance", newton_tolerance_names(), ""));
   }
   implicit.full_newton = s.boolean_or("full_newton", implicit.full_newton);
   implicit.reuse = s.boolean_or("reuse", implicit.reuse);

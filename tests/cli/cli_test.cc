@@ -200,6 +200,27 @@ TEST_F(Cli, OptionsOverrideTheSceneFile) {
   }
 }
 
+TEST_F(Cli, NewtonToleranceOfFixedStepsIsTheStepsErrorUnlessAsked) {
+  // The 8x8 cloth at 1/60: by default the solves converge to the steps' own
+  // error (counted), with --newton-tolerance accuracy to the accuracy's
+  // tolerance, which takes more Newton iterations.
+  const std::string common = "run '" + kModels +
+                             "cloth.yaml' --set cloth.nodes=[8,8] --t-final 0.5 --fixed-step "
+                             "--step 0.016666666666666666 --newton-solve chord -q";
+  Result r = run(common + " --stats wide.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run(common + " --newton-tolerance accuracy --stats tight.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json wide = nlohmann::json::parse(read(dir_ / "wide.json"))["statistics"];
+  const nlohmann::json tight = nlohmann::json::parse(read(dir_ / "tight.json"))["statistics"];
+  EXPECT_GT(wide["newton_tolerance_from_step_error"].get<long>(), 0);
+  EXPECT_EQ(tight["newton_tolerance_from_step_error"].get<long>(), 0);
+  EXPECT_LT(wide["newton_raphson_iterations"].get<long>(),
+            tight["newton_raphson_iterations"].get<long>());
+  r = run(common + " --newton-tolerance loose");
+  EXPECT_EQ(r.exit_code, 2);
+}
+
 TEST_F(Cli, VtkWritesFramesAndASeries) {
   const Result r = run("run '" + kModels +
                        "cloth.yaml' --set cloth.nodes=[4,3] --t-final 0.05 --vtk frames "
@@ -328,16 +349,28 @@ TEST_F(Cli, HelpDescribesEveryOption) {
   EXPECT_NE(r.out.find("run"), std::string::npos);
   r = run("run --help");
   EXPECT_EQ(r.exit_code, 0);
-  for (const char* option : {"SCENE",           "--integrator",
-                             "--t-final",       "--step",
-                             "--fixed-step",    "--error-estimate",
-                             "--accuracy",      "--jacobian",
-                             "--linear-solver", "--newton-form",
-                             "--full-newton",   "--no-reuse",
-                             "--output",        "--sample-period",
-                             "--stats",         "--vtk",
-                             "--set",           "--quiet",
-                             "--summary",       "analytic,forward,central,automatic",
+  for (const char* option : {"SCENE",
+                             "--integrator",
+                             "--t-final",
+                             "--step",
+                             "--fixed-step",
+                             "--error-estimate",
+                             "--accuracy",
+                             "--jacobian",
+                             "--linear-solver",
+                             "--newton-form",
+                             "--newton-tolerance",
+                             "step-error",
+                             "--full-newton",
+                             "--no-reuse",
+                             "--output",
+                             "--sample-period",
+                             "--stats",
+                             "--vtk",
+                             "--set",
+                             "--quiet",
+                             "--summary",
+                             "analytic,forward,central,automatic",
                              "Exit codes"}) {
     EXPECT_NE(r.out.find(option), std::string::npos) << option;
   }

@@ -168,6 +168,7 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   full_newton: true
   reuse: false
   definite_iteration_matrix: false
+  newton_tolerance: accuracy
 )"),
                                          "s.yaml");
   EXPECT_TRUE(config.integrator.fixed_step);
@@ -178,6 +179,9 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   EXPECT_TRUE(config.implicit.full_newton);
   EXPECT_FALSE(config.implicit.reuse);
   EXPECT_FALSE(config.implicit.definite_iteration_matrix);
+  EXPECT_FALSE(config.implicit.step_error_tolerance);
+  // Without the key, fixed steps take their tolerance from their own error.
+  EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.step_error_tolerance);
 }
 
 TEST(SceneYaml, OverridesReplaceScalarsListsAndBlocks) {

@@ -48,6 +48,12 @@ enum class NewtonSolve {
 NewtonSolve parse_newton_solve(const std::string& name);  // "auto" | ... | "recursive"
 std::string to_string(NewtonSolve solve);
 
+// What sets the Newton tolerance of fixed steps without an error estimate
+// (ImplicitSettings::step_error_tolerance): "step-error" (true) or
+// "accuracy" (false).
+bool parse_newton_tolerance(const std::string& name);
+std::string newton_tolerance_name(bool step_error_tolerance);
+
 ImplicitErrorEstimate parse_error_estimator(const std::string& name);  // "trapezoid" | "doubling"
 std::string to_string(ImplicitErrorEstimate estimator);
 

@@ -20,7 +20,8 @@ struct RunOverrides {
   std::optional<std::string> integrator;
   std::optional<double> t_final, step, accuracy, sample_period;
   std::optional<bool> fixed_step, error_estimate;
-  std::optional<std::string> jacobian, linear_solver, newton_form, error_estimator, newton_solve;
+  std::optional<std::string> jacobian, linear_solver, newton_form, error_estimator, newton_solve,
+      newton_tolerance;
   bool full_newton = false;  // only ever switches full Newton on, as the flag does
   bool no_reuse = false;     // only ever switches the reuse ladder off
 };

@@ -58,5 +58,6 @@ std::vector<std::string> linear_solver_names();
 std::vector<std::string> newton_form_names();
 std::vector<std::string> error_estimator_names();
 std::vector<std::string> newton_solve_names();
+std::vector<std::string> newton_tolerance_names();
 
 }  // namespace stiffsim
