@@ -64,6 +64,20 @@ MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string&
                                     "' has a moving root (root_motion); MuJoCo's base stays put");
     }
   }
+  // Per body, the sum of k rest over its joint's spring and drives: a drive
+  // with a constant target p adds kp p, so the joint's springs add up to
+  // one about (k rest + kp p) / (k + kp). A moving target would need
+  // MuJoCo's actuators and controls, which the peer does not set.
+  std::vector<double> moment(model.bodies(), 0.0);
+  for (const JointSpringElement& e : system.joint_springs().elements) {
+    moment[e.body()] += e.stiffness() * e.rest();
+  }
+  for (const JointDriveElement& e : system.drives().elements) {
+    if (!e.target().is_constant() && (e.stiffness() != 0.0 || e.damping() != 0.0))
+      throw std::invalid_argument("MuJoCo peer: joint '" + model.tree.bodies[e.body()].joint +
+                                  "' of '" + system.name() + "' has a drive with a moving target");
+    moment[e.body()] += e.stiffness() * e.target().value(0.0);
+  }
   MujocoProblem problem;
   problem.urdf_path = urdf_path;
   for (int k = 0; k < 3; ++k) problem.gravity[k] = options.gravity[k];
@@ -86,30 +100,12 @@ MujocoProblem mujoco_problem(const ArticulatedSystem& system, const std::string&
     problem.joints.push_back(body.joint);
     problem.initial_q.push_back(options.initial_q[qo]);
     problem.initial_v.push_back(options.initial_v[vo]);
-    // MuJoCo's joint has one spring and one damper: the joint's spring
-    // element and a drive on it add up. A drive with a constant target p
-    // adds kp p, which moves the spring's rest to (k rest + kp p) / (k + kp).
-    // A moving target would need MuJoCo's actuators and controls, which the
-    // peer does not set.
-    double stiffness = 0.0, damping = 0.0, moment = 0.0;  // moment: sum of k rest
-    for (const JointSpringElement& e : system.joint_springs().elements) {
-      if (e.body() != b) continue;
-      stiffness += e.stiffness();
-      damping += e.damping();
-      moment += e.stiffness() * e.rest();
-    }
-    for (const JointDriveElement& e : system.drives().elements) {
-      if (e.body() != b) continue;
-      if (!e.target().is_constant() && (e.stiffness() != 0.0 || e.damping() != 0.0))
-        throw std::invalid_argument("MuJoCo peer: joint '" + body.joint + "' of '" +
-                                    system.name() + "' has a drive with a moving target");
-      stiffness += e.stiffness();
-      damping += e.damping();
-      moment += e.stiffness() * e.target().value(0.0);
-    }
+    // MuJoCo's joint has one spring and one damper: the joint-local
+    // elements' sums (the articulated-body pivots'), about their common rest.
+    const double stiffness = system.pivot_stiffness()[b];
     problem.stiffness.push_back(stiffness);
-    problem.rest.push_back(stiffness > 0.0 ? moment / stiffness : 0.0);
-    problem.damping.push_back(damping);
+    problem.rest.push_back(stiffness > 0.0 ? moment[b] / stiffness : 0.0);
+    problem.damping.push_back(system.pivot_damping()[b]);
   }
   return problem;
 }

@@ -344,27 +344,31 @@ TEST(ForestDerivatives, RejectsASystemWithoutBushings) {
 }
 
 #ifdef STIFFSIM_COUNTS_ALLOCATIONS
+// Allocations of two force_jacobians() calls (without and with the
+// acceleration term) on a data that made its workspaces in a first call.
+long steady_jacobian_allocations(const ArticulatedSystem& sys, const RandomState& s) {
+  const std::unique_ptr<SystemData> data = sys.make_data();
+  ForceJacobians J = sys.jacobian_pattern();
+  JacobianRequest with_acceleration;
+  with_acceleration.acceleration = s.a.data();
+  const Eigen::VectorXd z;
+  sys.force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
+  g_allocations = 0;
+  g_count_allocations = true;
+  sys.force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
+  sys.force_jacobians(*data, 0.5, s.q, s.v, z, with_acceleration, &J);
+  g_count_allocations = false;
+  return g_allocations.load();
+}
+
 TEST(BushingElements, CompliantJacobiansAllocateNothing) {
   const RigidTree chain = make_chain_tree(30);
   const auto chain_sys = make_compliant(chain, with_springs(chain), kSoftBushings);
   const RigidTree tree = branched_tree(true);
   const auto tree_sys = make_compliant(tree, with_springs(tree), kSoftBushings);
   for (const ArticulatedSystem* sys : {chain_sys.get(), tree_sys.get()}) {
-    // The free bodies' derivatives and every bushing element's, through the
-    // system, once the data has made its derivative workspace.
-    const std::unique_ptr<SystemData> data = sys->make_data();
-    const RandomState s = random_state(*sys, 995u, 1.02);
-    ForceJacobians J = sys->jacobian_pattern();
-    JacobianRequest with_acceleration;
-    with_acceleration.acceleration = s.a.data();
-    const Eigen::VectorXd z;
-    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
-    g_allocations = 0;
-    g_count_allocations = true;
-    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
-    sys->force_jacobians(*data, 0.0, s.q, s.v, z, with_acceleration, &J);
-    g_count_allocations = false;
-    EXPECT_EQ(g_allocations.load(), 0) << sys->name();
+    // The free bodies' derivatives and every bushing element's.
+    EXPECT_EQ(steady_jacobian_allocations(*sys, random_state(*sys, 995u, 1.02)), 0) << sys->name();
   }
 }
 #endif
@@ -386,19 +390,9 @@ TEST(RneaDerivatives, ComputeAllocatesNothing) {
     rnea.compute(s.q, s.v, s.a.data(), &J.dF_dq, &J.dF_dv);
     g_count_allocations = false;
     EXPECT_EQ(g_allocations.load(), 0) << sys->name();
-    // The system's analytic Jacobians (the recursion, then the joint
-    // springs' and drives' elements) once its data has made its workspace.
-    const std::unique_ptr<SystemData> data = sys->make_data();
-    JacobianRequest with_acceleration;
-    with_acceleration.acceleration = s.a.data();
-    const Eigen::VectorXd z;
-    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
-    g_allocations = 0;
-    g_count_allocations = true;
-    sys->force_jacobians(*data, 0.0, s.q, s.v, z, JacobianRequest{}, &J);
-    sys->force_jacobians(*data, 0.5, s.q, s.v, z, with_acceleration, &J);
-    g_count_allocations = false;
-    EXPECT_EQ(g_allocations.load(), 0) << sys->name() << " (system)";
+    // The system's analytic Jacobians: the recursion, then the joint
+    // springs' and drives' elements.
+    EXPECT_EQ(steady_jacobian_allocations(*sys, s), 0) << sys->name() << " (system)";
   }
 }
 #endif
