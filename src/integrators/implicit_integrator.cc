@@ -169,8 +169,7 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
 void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd& x) {
   const auto start = WallClock::now();
   JacobianRequest request;
-  request.definite = implicit_.definite_iteration_matrix && !exact_jacobian_;
-  request.complete = exact_jacobian_;
+  request.definite = implicit_.definite_iteration_matrix;
   if (!caps_.constant_mass_matrix && dims_.nv > 0 && iterate_acceleration_) {
     request.acceleration = inertial_acceleration_.data();
   } else if (!caps_.constant_mass_matrix && dims_.nv > 0) {
@@ -193,7 +192,6 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   last_jacobian_seconds_ = seconds_since(start);
   stats_.jacobian_seconds += last_jacobian_seconds_;
   jacobians_valid_ = true;
-  last_jacobian_exact_ = exact_jacobian_;
 }
 
 void ImplicitIntegrator::compute_force_jacobians_ahead(double t, const Eigen::VectorXd& x,
@@ -304,7 +302,7 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   solves_since_exploration_ = 0;
   exploration_interval_ = kStartExploration;
   last_best_ = kChordStart;
-  explored_ = last_jacobian_exact_ = false;
+  explored_ = false;
   if (!structured_) newton_solve_reason_.clear();
   last_factorization_seconds_ = krylov_excess_seconds_ = last_jacobian_seconds_ = 0.0;
   solve_excess_seconds_ = 0.0;
@@ -312,6 +310,8 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_}) v->resize(nx);
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_}) v->resize(unknowns);
   x_prev_.resize(nx);
+  x_product_.resize(nx);
+  r_product_.resize(unknowns);
   linearization_.resize(nx);
   predictor_qdot_.resize(dims_.nq);
   energy_state_.x = Eigen::VectorXd::Zero(nx);
@@ -363,17 +363,8 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
     compute_jacobian_and_factor(t, x, h);
     return Refresh::kProceed;
   }
-  // The chord's matrices are formed from a definite Jacobian; the Krylov
-  // path leaves an exact one behind, which they must not use.
-  auto refactor_from_last_jacobian = [&] {
-    if (last_jacobian_exact_) {
-      compute_jacobian_and_factor(t, x, h);
-    } else {
-      form_and_factor(h);
-    }
-  };
   if (!iteration_matrix_factored() && trial == 1) {
-    refactor_from_last_jacobian();
+    form_and_factor(h);
     return Refresh::kProceed;
   }
   switch (trial) {
@@ -387,11 +378,11 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
       // Newton tolerance at 5e-5). Refactoring from the last Jacobian, as
       // Hairer's codes do whenever h changes, is the second rung anyway.
       if (formed_far_from(h)) {
-        refactor_from_last_jacobian();
+        form_and_factor(h);
       }
       return Refresh::kProceed;
     case 2:  // refactor with the current h from the last Jacobian
-      if (matrices_[active_].h != h && !last_jacobian_exact_) {
+      if (matrices_[active_].h != h) {
         form_and_factor(h);
         return Refresh::kProceed;
       }
@@ -488,7 +479,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     }
     r_ = -r_;
     if (structured) {
-      structured_direction(tf, h, x0, *x, r_, forcing, &dy_);
+      double seconds = 0.0;
+      newton_gmres(tf, h, x0, *x, r_, forcing, &dy_, &seconds);
     } else if (krylov) {
       if (!krylov_direction(tf, h, x0, *x, r_, forcing, &dy_)) return false;
     } else {
@@ -850,12 +842,13 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
 }
 
 int ImplicitIntegrator::choose_start() {
-  // Every Krylov iteration evaluates the exact Jacobian; where one costs
-  // more than a factorization (a compliant chain: seeded forward mode over
-  // free bodies against a banded LU), a Krylov iteration costs more than a
-  // full-Newton one would, and the chord wins by more still. Not even
+  // Every factorization of the Krylov path evaluates a Jacobian at the
+  // iterate, where the chord reuses one over many steps; where a Jacobian
+  // costs more than a factorization (a compliant chain: seeded forward
+  // mode over free bodies against a banded LU), the chord wins. Not even
   // tried then: on a 1000-link compliant chain its explorations tripled a
-  // 50-step run (1.16 s against 0.40 s).
+  // 50-step run (1.16 s against 0.40 s, when every Krylov iteration also
+  // evaluated the exact Jacobian).
   if (last_jacobian_seconds_ > last_factorization_seconds_ && last_factorization_seconds_ > 0.0) {
     return kChordStart;
   }
@@ -901,21 +894,28 @@ void ImplicitIntegrator::compute_jacobian_at_iterate(double tf, double h, const 
   mark_jacobian_stale();
 }
 
-void ImplicitIntegrator::structured_direction(double tf, double h, const Eigen::VectorXd& x0,
-                                              const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
-                                              double forcing, Eigen::VectorXd* dy) {
-  // The structured matrix leaves out the Jacobian terms of the velocity
-  // products and of the configuration dependence of M and gravity; on a
-  // stiff chain at h = 1e-3 they are of the order of M itself, and Newton
-  // on the structured matrix alone diverged where exact Newton took three
-  // iterations. GMRES restores the exact direction; each product is one
-  // residual, O(n) like the recursion. The difference step is the usual
-  // sqrt(eps) relative to the unknowns, so the product's relative error
-  // (~1e-8) stays far below any forcing term.
+GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::VectorXd& x0,
+                                             const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
+                                             double forcing, Eigen::VectorXd* dy, double* seconds) {
+  // The operator is the exact Jacobian of the residual, applied matrix-free
+  // by a difference of residuals: one residual per product, O(n) like the
+  // forces. The structured matrix leaves out the Jacobian terms of the
+  // velocity products and of the configuration dependence of M and gravity
+  // (on a stiff chain at h = 1e-3 they are of the order of M itself, and
+  // Newton on the structured matrix alone diverged where exact Newton took
+  // three iterations); the assembled preconditioner clamps compressed
+  // springs and drops the damping's derivative through the spring
+  // directions (with both, Newton converges quadratically; without the
+  // damping term it cycled on a 32x32 cloth at h = 1/60, where h c / m = 21
+  // makes damping the largest force). Assembling that exact Jacobian at
+  // every Newton iteration instead cost cloth.yaml at a fixed 1/60 over
+  // 2 s 0.45 s of Jacobians and 0.10 s of assembly, against 0.18 s for
+  // the products' residuals (two runs each, at equal Newton and Krylov
+  // counts). The difference step is the usual sqrt(eps) relative to the
+  // unknowns, so the product's relative error (~1e-8) stays far below any
+  // forcing term.
   const int offset = unknowns_offset();
   const int n = static_cast<int>(rhs.size());
-  x_product_.resize(x.size());
-  r_product_.resize(n);
   const double scale = 1.0 + x.segment(offset, n).lpNorm<Eigen::Infinity>();
   auto apply = [&](const Eigen::VectorXd& p, Eigen::VectorXd* Ap) {
     const double size = p.lpNorm<Eigen::Infinity>();
@@ -937,20 +937,20 @@ void ImplicitIntegrator::structured_direction(double tf, double h, const Eigen::
   const auto start = WallClock::now();
   const GmresResult krylov = gmres(apply, precondition, rhs, residual_scaling(), forcing,
                                    implicit_.max_krylov_iterations, &gmres_, dy);
-  stats_.krylov_seconds += seconds_since(start);
+  *seconds = seconds_since(start);
+  stats_.krylov_seconds += *seconds;
   ++stats_.krylov_solves;
   stats_.krylov_iterations += krylov.iterations;
   stats_.krylov_max_iterations = std::max<long>(stats_.krylov_max_iterations, krylov.iterations);
   // A solve that missed its tolerance still lowered the linearized
   // residual; the line search judges the direction.
   if (!krylov.converged) ++stats_.krylov_failures;
+  return krylov;
 }
 
 bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::VectorXd& x0,
                                           const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
                                           double forcing, Eigen::VectorXd* dy) {
-  // The current Newton matrix, linearized at the iterate itself.
-  bool symmetric = false;
   preconditioner_fresh_ = false;
   if (refactor_first_ || refactor_due_ || refactor_failed_ || !iteration_matrix_factored()) {
     // The preconditioner: the definite (clamped, symmetric) matrix at this
@@ -961,37 +961,16 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
     refactor_first_ = false;
     preconditioner_fresh_ = true;
     compute_jacobian_at_iterate(tf, h, x0, x);
+    bool symmetric = false;
     const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
     if (!factor_iteration_matrix(preconditioner, symmetric, h)) return false;
   }
-  // The operator: the true Jacobian of the residual. Compressed springs keep
-  // their negative transverse stiffness and the damping force its
-  // derivative through the spring directions (unsymmetric). With both, the
-  // Newton iteration converges quadratically; without the damping term it
-  // converged linearly and cycled on a 32x32 cloth at h = 1/60, where
-  // h c / m = 21 makes damping the largest force.
-  exact_jacobian_ = true;
-  compute_jacobian_at_iterate(tf, h, x0, x);
-  exact_jacobian_ = false;
-
-  const SparseMatrix& A = form_iteration_matrix(h, &symmetric);
-  const auto start = WallClock::now();
-  auto apply = [&A](const Eigen::VectorXd& p, Eigen::VectorXd* Ap) { Ap->noalias() = A * p; };
-  auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
-    solve_iteration_matrix(r, z);
-  };
-  const GmresResult krylov = gmres(apply, precondition, rhs, residual_scaling(), forcing,
-                                   implicit_.max_krylov_iterations, &gmres_, dy);
-  const double seconds = seconds_since(start);
-  stats_.krylov_seconds += seconds;
-  ++stats_.krylov_solves;
-  stats_.krylov_iterations += krylov.iterations;
-  stats_.krylov_max_iterations = std::max<long>(stats_.krylov_max_iterations, krylov.iterations);
+  double seconds = 0.0;
+  const GmresResult krylov = newton_gmres(tf, h, x0, x, rhs, forcing, dy, &seconds);
   if (!krylov.converged) {
     // The preconditioner is too far from the current matrix: the next
     // iteration refactors. This one goes on with what GMRES has, which
     // still lowers the linearized residual.
-    ++stats_.krylov_failures;
     refactor_failed_ = true;
     return true;
   }

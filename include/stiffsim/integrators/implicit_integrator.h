@@ -288,10 +288,10 @@ class ImplicitIntegrator : public IntegratorBase {
   void compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h);
   bool newton(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
               int trial, Eigen::VectorXd* x);
-  // The Krylov path's Newton direction at the iterate x: the current
-  // iteration matrix (Jacobian at x), refactored when the cost model or a
-  // failed CG solve says so, then CG to the forcing term's tolerance on
-  // rhs = -residual. False when no usable matrix could be factored.
+  // The Krylov path's Newton direction at the iterate x: GMRES
+  // (newton_gmres()) preconditioned by the last factorization, which is
+  // refactored at x when the cost model or a failed solve says so. False
+  // when no usable matrix could be factored.
   bool krylov_direction(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                         const Eigen::VectorXd& rhs, double forcing, Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
@@ -348,12 +348,15 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr int kStructuredTrial = 6;
   // Factors the structured matrix at the iterate x, timed and counted.
   bool factor_structured(const Eigen::VectorXd& x, double h);
-  // The structured path's Newton direction at the iterate x (residual -rhs):
-  // GMRES on the exact Jacobian, applied matrix-free by a difference of
-  // residuals, preconditioned by the structured matrix factored at x.
-  void structured_direction(double tf, double h, const Eigen::VectorXd& x0,
-                            const Eigen::VectorXd& x, const Eigen::VectorXd& rhs, double forcing,
-                            Eigen::VectorXd* dy);
+  // The Newton direction at the iterate x (rhs = minus the residual there)
+  // to the forcing term's relative tolerance: GMRES on the exact Jacobian,
+  // applied matrix-free by a difference of residuals, preconditioned by the
+  // current factorization (the structured matrix at x, or the Krylov path's
+  // last assembled one). Counts the Krylov statistics; *seconds is its wall
+  // time.
+  GmresResult newton_gmres(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                           const Eigen::VectorXd& rhs, double forcing, Eigen::VectorXd* dy,
+                           double* seconds);
   Eigen::VectorXd x_product_, r_product_;
   std::unique_ptr<StructuredNewtonMatrix> structured_;
   // A factorization formed for a step more than this factor away from the
@@ -408,9 +411,7 @@ class ImplicitIntegrator : public IntegratorBase {
   int solves_since_exploration_ = 0;
   int exploration_interval_ = kStartExploration;
   int last_best_ = kChordStart;
-  bool explored_ = false;             // the last choice tried the costlier start
-  bool last_jacobian_exact_ = false;  // jacobians_ hold the Krylov path's exact Jacobian
-  bool exact_jacobian_ = false;       // the next Jacobian without the definite clamp
+  bool explored_ = false;  // the last choice tried the costlier start
   GmresWorkspace gmres_;
   // Step start and h of the Jacobian the ladder last evaluated (NaN after a
   // full-Newton iterate replaced it).
