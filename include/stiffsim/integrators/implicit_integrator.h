@@ -368,6 +368,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // largest of the current one and the last kMeritMemory accepted ones
   // (Grippo, Lampariello & Lucidi's non-monotone rule; see newton()).
   static constexpr int kMeritMemory = 3;
+  // The Krylov path's chord test (see newton()) runs after updates at most
+  // this many times the Newton tolerance.
+  static constexpr double kChordTestGate = 10.0;
 
   struct IterationMatrix {
     LinearSolverChoice solver;
@@ -434,7 +437,7 @@ class ImplicitIntegrator : public IntegratorBase {
   };
   std::array<RememberedEnergy, 2> remembered_energy_;
   int next_remembered_ = 0;
-  Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_;
+  Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_, chord_update_;
 };
 
 }  // namespace stiffsim
