@@ -107,14 +107,11 @@ TEST(KrylovNewton, ImplicitEulerClothEqualsFreshDirectSolves) {
 // Newton tolerance, alone or confirming the rate of the inexact updates.
 // Steps of a falling 24x24 cloth at h = 1/60, with the preconditioner
 // reused across iterations and steps as in a run, each against a solve from
-// the same state to 1e-10. Each test estimates the error (the residual in
-// the mass's units, the chord's update with an old factorization) and may
-// misjudge it: measured within 2.3 times the tolerance, bounded by 3. The
-// rate test alone put these steps up to 40 times the tolerance from the
-// root.
-TEST(KrylovNewton, ChordTestBoundsTheKrylovPathsError) {
+// the same state to 1e-10; returns the largest distance over the Newton
+// tolerance.
+double krylov_steps_against_roots(double accuracy, IntegratorStatistics* stats) {
   const auto sys = cloth(24, 1e3);
-  const double h = 1.0 / 60, accuracy = 1e-2, tolerance = 0.05 * accuracy;
+  const double h = 1.0 / 60, tolerance = 0.05 * accuracy;
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kKrylov;
   implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
@@ -125,16 +122,35 @@ TEST(KrylovNewton, ChordTestBoundsTheKrylovPathsError) {
     const State start = vie.state();
     vie.integrate_to(start.t + h);
     const OneStep root = step_from(Method::kVie, *sys, start, h, 1e-10, NewtonSolve::kKrylov);
-    ASSERT_EQ(root.stats.substep_failures, 0);
+    EXPECT_EQ(root.stats.substep_failures, 0);
     worst = std::max(worst, (vie.state().x - root.x).lpNorm<Eigen::Infinity>());
   }
-  const IntegratorStatistics& st = vie.statistics();
-  EXPECT_EQ(st.substep_failures, 0);
-  EXPECT_GT(st.krylov_chord_convergences, 0);
-  EXPECT_LE(worst, 3 * tolerance);
+  *stats = vie.statistics();
+  EXPECT_EQ(stats->substep_failures, 0);
   // The steps move far more than the tolerance: the comparison means
   // something.
   EXPECT_GT((vie.state().x - sys->initial_state().x).lpNorm<Eigen::Infinity>(), 100 * tolerance);
+  return worst / tolerance;
+}
+
+// Each test estimates the error (the residual in the mass's units, the
+// chord's update with an old factorization, which misses what the exact
+// matrix's soft directions amplify) and may misjudge it: measured 1.7-8.7
+// times the tolerance in eight runs (the cost model's timings decide which
+// factorization is old). The rate test alone put these steps 40 times the
+// tolerance from the root, in every run; the bound, 20, tells the two
+// apart.
+TEST(KrylovNewton, RateTestNeedsTheChordsAgreement) {
+  IntegratorStatistics stats;
+  EXPECT_LE(krylov_steps_against_roots(1e-3, &stats), 20.0);
+}
+
+// At a looser tolerance the chord test ends solves (measured 9-11 of 15)
+// within 2.3-4.2 times the tolerance of the root.
+TEST(KrylovNewton, ChordTestEndsSolvesNearTheRoot) {
+  IntegratorStatistics stats;
+  EXPECT_LE(krylov_steps_against_roots(1e-2, &stats), 20.0);
+  EXPECT_GT(stats.krylov_chord_convergences, 0);
 }
 
 // A rope at a step so small that h^2 K is a ten-thousandth of M: the first
