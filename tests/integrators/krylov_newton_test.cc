@@ -1,5 +1,6 @@
 // The Krylov path of the Newton iteration (NewtonSolve::kKrylov): GMRES on
-// the current Newton matrix, preconditioned by the last factorization. Its
+// the exact Jacobian at the iterate (applied matrix-free), preconditioned by
+// the last factorization. Its
 // converged answers equal those of a fresh direct solve every iteration
 // within the Newton tolerance, and its cost model refactors when the
 // preconditioner is poor, never while it stays exact.

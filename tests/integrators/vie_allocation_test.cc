@@ -56,8 +56,9 @@ TEST(VieAllocation, StepWithErrorEstimateAllocatesNothing) {
   EXPECT_EQ(allocations_while_stepping(true), 0);
 }
 
-// The Krylov path: GMRES on the current matrix (Jacobian, assembly, the
-// Krylov basis, residuals, line search) of a rope large enough for CHOLMOD
+// The Krylov path: GMRES on the exact Jacobian (the Krylov basis, the
+// residuals of its matrix-free products and of the line search, the chord
+// test) of a rope large enough for CHOLMOD
 // (300 DOFs). CHOLMOD's own numeric factorization allocates its workspace
 // inside the library, so the window counted is one without a
 // factorization (asserted), at a step where the first one stays a good

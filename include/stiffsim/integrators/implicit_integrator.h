@@ -37,7 +37,7 @@ enum class NewtonSolve {
   // Cholesky (CHOLMOD LL^T); kChord otherwise (small dense systems, IE).
   kAuto,
   kChord,   // the reuse ladder: the last factorization is the Newton matrix
-  kKrylov,  // CG on the current Newton matrix, preconditioned by the last factorization
+  kKrylov,  // GMRES on the exact Jacobian at the iterate, preconditioned by the last factorization
   kFresh,   // a fresh Jacobian and factorization every iteration (full Newton)
   // The system's structured Newton matrix (structured_newton_matrix.h: an
   // exact tree's articulated-body recursion, O(n)) factored at every
@@ -198,7 +198,7 @@ class ImplicitIntegrator : public IntegratorBase {
     (void)h;
     return x0;
   }
-  // True when the Newton iterations solve by CG on the current matrix
+  // True when the Newton iterations solve by GMRES on the exact Jacobian
   // (decided at the first factorization, see NewtonSolve).
   bool krylov_path() const { return krylov_; }
   // Called once per Newton trial before the first iteration.

@@ -68,8 +68,10 @@ struct IntegratorStatistics {
   long krylov_iterations = 0;
   long krylov_max_iterations = 0;
   long krylov_failures = 0;
-  // Krylov-path solves ended by the chord test: the last factorization's
-  // solve of the residual (the chord's next update) within the tolerance.
+  // Krylov-path iterates accepted by the chord test: the last
+  // factorization's solve of the residual (the chord's next update) within
+  // the tolerance. The solve then ends, unless a widened tolerance is
+  // narrowed (newton_tolerance_narrowed) or the energy guard rejects it.
   long krylov_chord_convergences = 0;
   long factorizations_ladder = 0;         // the chord's reuse ladder and full Newton
   long factorizations_first = 0;          // no factorization yet, or one for another h (x4)
