@@ -157,10 +157,11 @@ void add_run_options(CLI::App* run, RunOptions* o) {
           ->group(newton);
   o->newton_solve_option =
       run->add_option("--newton-solve", o->newton_solve,
-                      "How Newton iterations solve: auto (default: krylov where the iteration "
-                      "matrix is symmetric positive definite and sparse, chord otherwise), "
-                      "krylov (CG on the current matrix, preconditioned by the last "
-                      "factorization, refactored by measured cost), chord (the last "
+                      "How Newton iterations solve: auto (default: where the iteration "
+                      "matrix is sparse, each solve starts with the chord or krylov, whichever "
+                      "cost less lately; chord otherwise), krylov (GMRES on the exact Jacobian, "
+                      "applied matrix-free, preconditioned by the last factorization, "
+                      "refactored by measured cost), chord (the last "
                       "factorization as the Newton matrix, the reuse ladder), fresh (a new "
                       "Jacobian and factorization every iteration) or recursive (exact "
                       "articulated trees: the articulated-body recursion, O(n) per iteration; "

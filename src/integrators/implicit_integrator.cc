@@ -615,15 +615,18 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     const double h_f = matrices_[active_].h;
     const bool chord_usable = krylov && !refactor_failed_;
     const double chord_scale = h_f > h ? (h_f / h) * (h_f / h) : 1.0;
-    bool chord_tested = false;
+    // Solved at most once per iterate (a NaN update never agrees).
+    bool chord_solved = false;
+    auto chord_agrees = [&] {
+      if (!chord_solved) solve_iteration_matrix(r_, &chord_update_);  // minus the chord's update
+      chord_solved = true;
+      return chord_scale * chord_update_.lpNorm<Eigen::Infinity>() <= solve_tolerance_;
+    };
     if (chord_usable && !residual_converged &&
-        dx_.segment(offset, n).lpNorm<Eigen::Infinity>() <= kChordTestGate * solve_tolerance_) {
-      solve_iteration_matrix(r_, &chord_update_);  // minus the chord's update
-      chord_tested = true;
-      if (chord_scale * chord_update_.lpNorm<Eigen::Infinity>() <= solve_tolerance_) {
-        residual_converged = true;
-        ++stats_.krylov_chord_convergences;
-      }
+        dx_.segment(offset, n).lpNorm<Eigen::Infinity>() <= kChordTestGate * solve_tolerance_ &&
+        chord_agrees()) {
+      residual_converged = true;
+      ++stats_.krylov_chord_convergences;
     }
     if (alpha < 1.0 && !residual_converged) {
       // A damped step says nothing about the rate of the undamped
@@ -642,19 +645,14 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       // On the Krylov path the rate test alone is no guide: the updates
       // shrink as the forcing term tightens as much as by contraction, and
       // their ratio read as a rate accepted steps of a falling 24x24 cloth
-      // at h = 1/60 40 times the tolerance from the root. The chord
+      // at h = 1/60 40 times the tolerance from the root. The chord's
       // estimate must agree (RateTestNeedsTheChordsAgreement: 1.7-8.7
-      // times, an estimate still; ending only on the residual or on an
+      // times, an estimate still). Ending only on the residual or on an
       // update within the tolerance gave 1.3-1.7 at 15-25% more Newton
-      // iterations on cloth.yaml). Without
-      // the rate test, the chord and residual tests alone cost cloth.yaml
-      // at a fixed 1/60 650-750 Newton iterations and 3-6 halvings (two
-      // runs), against 540-630 and 0-1 (three runs).
-      if (krylov && !at_round_off()) {
-        if (!chord_usable) continue;
-        if (!chord_tested) solve_iteration_matrix(r_, &chord_update_);
-        if (!(chord_scale * chord_update_.lpNorm<Eigen::Infinity>() <= solve_tolerance_)) continue;
-      }
+      // iterations on cloth.yaml at a fixed 1/60; without the rate test,
+      // the chord and residual tests alone took 650-750 Newton iterations
+      // and 3-6 halvings there (two runs), against 540-630 and 0-1 (three).
+      if (krylov && !at_round_off() && !(chord_usable && chord_agrees())) continue;
     }
     // A tolerance widened by the step's own error (use_step_error_tolerance)
     // is narrowed back to kappa * accuracy for the rest of the solve where
