@@ -25,7 +25,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 51 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 52 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -70,6 +70,7 @@ json statistics_object(const IntegratorStatistics& s) {
   j["krylov_max_iterations"] = s.krylov_max_iterations;
   j["krylov_failures"] = s.krylov_failures;
   j["krylov_chord_convergences"] = s.krylov_chord_convergences;
+  j["krylov_rate_test_vetoes"] = s.krylov_rate_test_vetoes;
   j["factorizations_ladder"] = s.factorizations_ladder;
   j["recursive_factorizations"] = s.recursive_factorizations;
   j["factorizations_first"] = s.factorizations_first;

@@ -64,11 +64,12 @@ struct ImplicitSettings {
   bool full_newton = false;  // fresh Jacobian and factorization every iteration
   NewtonSolve newton_solve = NewtonSolve::kAuto;  // kFresh sets full_newton
   // Krylov path: GMRES products per linear solve before the solve counts
-  // as failed (the preconditioner is then refactored), and the largest
-  // Eisenstat-Walker forcing term (relative tolerance of a linear solve).
-  // 0.1 measured best on the 32x32 cloth at h = 1/60 over 0.5 s (0.05:
-  // equal; 0.2: 1.5x the time; 0.5: 2.3x, with 9 step failures).
+  // as failed (the preconditioner is then refactored), and its forcing
+  // term, the relative tolerance of every linear solve (constant: see
+  // newton()).
   int max_krylov_iterations = 40;
+  double krylov_forcing = 0.2;
+  // Recursive path: the largest Eisenstat-Walker forcing term.
   double max_forcing = 0.1;
   bool reuse = true;  // false: fresh Jacobian and factorization every step attempt
   int max_newton_iterations = 10;

@@ -73,10 +73,14 @@ struct IntegratorStatistics {
   // the tolerance. The solve then ends, unless a widened tolerance is
   // narrowed (newton_tolerance_narrowed) or the energy guard rejects it.
   long krylov_chord_convergences = 0;
-  long factorizations_ladder = 0;         // the chord's reuse ladder and full Newton
-  long factorizations_first = 0;          // no factorization yet, or one for another h (x4)
-  long factorizations_cost_model = 0;     // CG time since the last one exceeded a factorization's
-  long factorizations_krylov_failed = 0;  // a CG solve missed its tolerance
+  // Krylov-path iterates whose updates passed the rate test while the
+  // chord's update was not within the tolerance: the solve went on.
+  long krylov_rate_test_vetoes = 0;
+  long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
+  long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
+  long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's
+  long factorizations_krylov_failed =
+      0;  // a GMRES solve missed its tolerance or its direction failed
   // Newton matrices factored by the system's own structure (the
   // articulated-body recursion, O(n)), one per Newton iteration; not in
   // iteration_matrix_factorizations, which counts assembled matrices.
