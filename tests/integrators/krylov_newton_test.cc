@@ -227,5 +227,27 @@ TEST(KrylovNewton, CostModelRefactorsAPoorPreconditioner) {
                 st.factorizations_krylov_failed + st.factorizations_ladder);
 }
 
+// The Krylov path's linear solves take a constant forcing term; only the
+// kEisenstatWalkerSolves (10) solves after a failed one take Eisenstat-
+// Walker's. A sheet of k = 1e6 springs folding at h = 1/60 fails some
+// solves; one of k = 1e3 over the same time fails none.
+TEST(KrylovNewton, SolvesAfterAFailureTakeEisenstatWalkerForcing) {
+  for (const double k : {1e6, 1e3}) {
+    const auto sys = cloth(12, k);
+    auto vie = make(Method::kVie, *sys, 1.0 / 60, 1e-3, NewtonSolve::kKrylov);
+    vie->initialize(sys->initial_state());
+    vie->integrate_to(0.5);
+    const IntegratorStatistics& st = vie->statistics();
+    if (k > 1e3) {
+      EXPECT_GT(st.substep_failures, 0);
+      EXPECT_GT(st.krylov_eisenstat_walker_solves, 0);
+      EXPECT_LE(st.krylov_eisenstat_walker_solves, 10 * st.substep_failures);
+    } else {
+      EXPECT_EQ(st.substep_failures, 0);
+      EXPECT_EQ(st.krylov_eisenstat_walker_solves, 0);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace stiffsim

@@ -69,7 +69,8 @@ struct ImplicitSettings {
   // newton()).
   int max_krylov_iterations = 40;
   double krylov_forcing = 0.2;
-  // Recursive path: the largest Eisenstat-Walker forcing term.
+  // The largest Eisenstat-Walker forcing term (recursive path; Krylov path
+  // after a failed solve).
   double max_forcing = 0.1;
   bool reuse = true;  // false: fresh Jacobian and factorization every step attempt
   int max_newton_iterations = 10;
@@ -401,6 +402,10 @@ class ImplicitIntegrator : public IntegratorBase {
   // the same 12, 0.24 s; at 1, 53 and 243.
   double solve_excess_seconds_ = 0.0;
   static constexpr double kStartRefactorShare = 0.3;
+  // Krylov solves left that take Eisenstat-Walker forcing after a failed
+  // solve (newton()).
+  int eisenstat_walker_solves_left_ = 0;
+  static constexpr int kEisenstatWalkerSolves = 10;
   bool refactor_due_ = false;          // the cost model asks for a factorization
   bool refactor_first_ = false;        // none yet, or one formed for another h
   bool refactor_failed_ = false;       // the last Krylov solve missed its tolerance

@@ -76,6 +76,9 @@ struct IntegratorStatistics {
   // Krylov-path iterates whose updates passed the rate test while the
   // chord's update was not within the tolerance: the solve went on.
   long krylov_rate_test_vetoes = 0;
+  // Krylov solves that took Eisenstat-Walker forcing instead of the
+  // constant one: those that follow a failed solve.
+  long krylov_eisenstat_walker_solves = 0;
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's
