@@ -465,10 +465,11 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   //   products for it. The iteration is ended by the residual and chord
   //   tests, which do not depend on the forcing, so nothing needs a tight
   //   last solve. A constant 0.2 took cloth.yaml at a fixed 1/60 over 2 s
-  //   from 190-215 factorizations and 3,200-4,000 products to 127-154 and
+  //   from 189-215 factorizations and 3,200-4,000 products to 127-154 and
   //   2,200-2,800, at equal Newton iterations (five runs each).
-  // - Krylov path after a failed solve: Eisenstat-Walker again for the next
-  //   kEisenstatWalkerSolves solves. Where solves fail (the k = 1e6 sheet's
+  // - Krylov path after a failed Newton solve: Eisenstat-Walker again for
+  //   the next kEisenstatWalkerSolves Newton solves on this path (chord
+  //   starts under auto do not count them down). Where solves fail (the k = 1e6 sheet's
   //   residual cycling as it folds), nearly exact directions fail less:
   //   cloth_stiff.yaml over 1 s took 26-45 halvings with the constant alone
   //   and 15-21 with choice 2 throughout, in equal time (six runs each); on
@@ -499,7 +500,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
         forcing = std::min(ceiling, ew);
       }
       // No oversolving: a linear residual below half the Newton tolerance
-      // cannot change the outcome of the convergence test.
+      // cannot change the outcome of the convergence test (Eisenstat-Walker
+      // only: a constant forcing is the ceiling already).
       const double residual_size = residual_norm(r_);
       if (std::isfinite(residual_size) && residual_size > 0.0) {
         forcing = std::min(ceiling, std::max(forcing, 0.5 * solve_tolerance_ / residual_size));

@@ -109,7 +109,9 @@ TEST(KrylovNewton, ImplicitEulerClothEqualsFreshDirectSolves) {
 // state instead (the predictor-free first iterate) found, on the 15th step
 // of the cloth below, a root 0.03 m/s (60 times the tolerance at accuracy
 // 1e-2) from the one the run's own iterates approached; from the accepted
-// step, Newton moved it by 3.9 times the tolerance.
+// step, Newton moved it by 3.9 times the tolerance. (Whether a root is
+// the step the method means, not a spurious one, is the energy guard's
+// question, tested in its own tests.)
 class RootNear : public VelocityImplicitEuler {
  public:
   RootNear(const System& sys, double h)

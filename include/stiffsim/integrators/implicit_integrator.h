@@ -65,8 +65,8 @@ struct ImplicitSettings {
   NewtonSolve newton_solve = NewtonSolve::kAuto;  // kFresh sets full_newton
   // Krylov path: GMRES products per linear solve before the solve counts
   // as failed (the preconditioner is then refactored), and its forcing
-  // term, the relative tolerance of every linear solve (constant: see
-  // newton()).
+  // term, the constant relative tolerance of its linear solves (but in the
+  // Newton solves that follow a failed one: see newton()).
   int max_krylov_iterations = 40;
   double krylov_forcing = 0.2;
   // The largest Eisenstat-Walker forcing term (recursive path; Krylov path

@@ -52,7 +52,7 @@ struct IntegratorStatistics {
   long jacobian_approximated_terms = 0;  // definite clamps in iteration matrices (Choi & Ko)
   long iteration_matrix_nonzeros = 0;
   long factor_nonzeros = 0;
-  // Krylov path (NewtonSolve::kKrylov): CG solves of the current Newton
+  // Krylov path (NewtonSolve::kKrylov): GMRES solves of the current Newton
   // system, their products with it (total and the most in one solve), the
   // solves that missed their tolerance within the iteration budget, and why
   // each factorization happened.
@@ -74,10 +74,12 @@ struct IntegratorStatistics {
   // narrowed (newton_tolerance_narrowed) or the energy guard rejects it.
   long krylov_chord_convergences = 0;
   // Krylov-path iterates whose updates passed the rate test while the
-  // chord's update was not within the tolerance: the solve went on.
+  // chord's update was not within the tolerance (or no factorization could
+  // give one): the solve went on.
   long krylov_rate_test_vetoes = 0;
-  // Krylov solves that took Eisenstat-Walker forcing instead of the
-  // constant one: those that follow a failed solve.
+  // Newton solves on the Krylov path whose GMRES solves took
+  // Eisenstat-Walker forcing instead of the constant one: the ten Krylov
+  // Newton solves after a failed Newton solve.
   long krylov_eisenstat_walker_solves = 0;
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
@@ -95,7 +97,7 @@ struct IntegratorStatistics {
   double factorization_seconds = 0.0;
   double solve_seconds = 0.0;
   double derivative_seconds = 0.0;
-  double krylov_seconds = 0.0;  // CG solves, their preconditioner solves included
+  double krylov_seconds = 0.0;  // GMRES solves, their preconditioner solves included
 };
 
 // What an integrator says about itself for reports and stats files.
