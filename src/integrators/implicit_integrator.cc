@@ -279,7 +279,7 @@ void ImplicitIntegrator::choose_newton_solve() {
     newton_solve_reason_ =
         std::string(asked == NewtonSolve::kKrylov ? "asked for: " : "auto: ") +
         "sparse iteration matrix (" + method + "); GMRES on the exact Jacobian at each iterate " +
-        "(matrix-free), the last " + "factorization preconditions, refactored by measured cost" +
+        "(matrix-free), the last factorization preconditions, refactored by measured cost" +
         (asked == NewtonSolve::kKrylov
              ? ""
              : "; each step starts with the chord or Krylov, whichever cost less lately");
@@ -498,13 +498,13 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
         const double previous = 0.9 * forcing * forcing;
         if (previous > 0.1) ew = std::max(ew, previous);
         forcing = std::min(ceiling, ew);
-      }
-      // No oversolving: a linear residual below half the Newton tolerance
-      // cannot change the outcome of the convergence test (Eisenstat-Walker
-      // only: a constant forcing is the ceiling already).
-      const double residual_size = residual_norm(r_);
-      if (std::isfinite(residual_size) && residual_size > 0.0) {
-        forcing = std::min(ceiling, std::max(forcing, 0.5 * solve_tolerance_ / residual_size));
+        // No oversolving: a linear residual below half the Newton
+        // tolerance cannot change the outcome of the convergence test. (A
+        // constant forcing, and the first iteration's, is the ceiling.)
+        const double residual_size = residual_norm(r_);
+        if (std::isfinite(residual_size) && residual_size > 0.0) {
+          forcing = std::min(ceiling, std::max(forcing, 0.5 * solve_tolerance_ / residual_size));
+        }
       }
       last_r_norm = r_norm;
     }

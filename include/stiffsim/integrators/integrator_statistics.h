@@ -84,8 +84,8 @@ struct IntegratorStatistics {
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's
-  long factorizations_krylov_failed =
-      0;  // a GMRES solve missed its tolerance or its direction failed
+  // A GMRES solve missed its tolerance, or its direction failed the search.
+  long factorizations_krylov_failed = 0;
   // Newton matrices factored by the system's own structure (the
   // articulated-body recursion, O(n)), one per Newton iteration; not in
   // iteration_matrix_factorizations, which counts assembled matrices.
