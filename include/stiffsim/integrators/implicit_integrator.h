@@ -295,7 +295,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // refactored at x when the cost model or a failed solve says so. False
   // when no usable matrix could be factored.
   bool krylov_direction(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
-                        const Eigen::VectorXd& rhs, double forcing, Eigen::VectorXd* dy);
+                        const Eigen::VectorXd& rhs, double forcing, bool may_abandon,
+                        Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
   void choose_newton_solve();
   // Jacobian at the iterate x itself (full Newton, the Krylov path); marks
@@ -357,8 +358,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // last assembled one). Counts the Krylov statistics; *seconds is its wall
   // time.
   GmresResult newton_gmres(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
-                           const Eigen::VectorXd& rhs, double forcing, Eigen::VectorXd* dy,
-                           double* seconds);
+                           const Eigen::VectorXd& rhs, double forcing, double abandon_products,
+                           Eigen::VectorXd* dy, double* seconds);
   Eigen::VectorXd x_product_, r_product_;
   std::unique_ptr<StructuredNewtonMatrix> structured_;
   // A factorization formed for a step more than this factor away from the
@@ -393,6 +394,15 @@ class ImplicitIntegrator : public IntegratorBase {
   std::string newton_solve_reason_;
   double last_factorization_seconds_ = 0.0;
   double last_jacobian_seconds_ = 0.0;  // the last force Jacobian's evaluation
+  // The Krylov path's last refactoring (Jacobian, assembly, factorization)
+  // and last GMRES product (residual and preconditioner solve), measured;
+  // they set a stale preconditioner's budget of products (krylov_direction).
+  double last_refactor_seconds_ = 0.0;
+  double product_seconds_ = 0.0;
+  // The products a solve with a fresh preconditioner is expected to take
+  // at the constant forcing (1-6 on the folding 100x100 sheet); no solve
+  // is abandoned before this many.
+  static constexpr double kFreshSolveProducts = 3.0;
   double krylov_excess_seconds_ = 0.0;
   // The Krylov excess of the current (or last) solve, and the share of a
   // factorization beyond which the next solve starts with a fresh one.

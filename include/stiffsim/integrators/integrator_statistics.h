@@ -81,6 +81,12 @@ struct IntegratorStatistics {
   // Eisenstat-Walker forcing instead of the constant one: the ten Krylov
   // Newton solves after a failed Newton solve.
   long krylov_eisenstat_walker_solves = 0;
+  // GMRES solves against a stale preconditioner (formed at an earlier
+  // iterate) abandoned because the products they still needed, at the rate
+  // shown, would cost more than refactoring: the preconditioner was
+  // refactored at the iterate (a factorizations_krylov_failed) and the
+  // solve repeated (both in krylov_solves; not in krylov_failures).
+  long krylov_stale_solves_abandoned = 0;
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's

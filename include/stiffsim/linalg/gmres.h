@@ -20,8 +20,10 @@ struct GmresWorkspace {
   Eigen::MatrixXd preconditioned;  // n x m: P^-1 times each, so x costs no extra solve
   Eigen::MatrixXd hessenberg;      // (m + 1) x m, triangularized in place by Givens rotations
   Eigen::VectorXd cosines, sines, rhs, coefficients, w, z;
+  // Grows only: a solve given a smaller budget of products than the last
+  // (a stale preconditioner's, see ImplicitIntegrator) allocates nothing.
   void resize(Eigen::Index n, int m) {
-    if (basis.rows() == n && basis.cols() == m + 1) return;
+    if (basis.rows() == n && basis.cols() >= m + 1) return;
     basis.resize(n, m + 1);
     preconditioned.resize(n, m);
     hessenberg.resize(m + 1, m);
@@ -36,6 +38,7 @@ struct GmresResult {
   int iterations = 0;              // products with A (and preconditioner solves)
   bool converged = false;          // |S (b - A x)| <= tolerance |S b| reached
   double relative_residual = 1.0;  // |S (b - A x)| / |S b| at exit
+  bool abandoned = false;          // ended by give_up before max_iterations
 };
 
 // Solves A x = b from x = 0, minimizing |S (b - A x)|_2 over the Krylov
@@ -45,10 +48,13 @@ struct GmresResult {
 // computes z = P^-1 r. Since the scaled residual norm never grows, x is a
 // descent direction for 1/2 |S r(x)|^2 at any point whose residual is -b
 // and whose Jacobian is A, whenever it reduced that norm at all.
-template <class Apply, class Precondition>
+// give_up(iterations, relative_residual), asked after every product that
+// left the solve short of its tolerance, may end it early (the result then
+// says abandoned).
+template <class Apply, class Precondition, class GiveUp>
 GmresResult gmres(const Apply& apply, const Precondition& precondition, const Eigen::VectorXd& b,
                   const Eigen::VectorXd& scale, double relative_tolerance, int max_iterations,
-                  GmresWorkspace* ws, Eigen::VectorXd* x) {
+                  GmresWorkspace* ws, Eigen::VectorXd* x, const GiveUp& give_up) {
   GmresResult result;
   const Eigen::Index n = b.size();
   x->setZero(n);
@@ -118,6 +124,10 @@ GmresResult gmres(const Apply& apply, const Precondition& precondition, const Ei
       break;
     }
     if (after == 0.0) break;  // the Krylov space is invariant: x is exact
+    if (k < max_iterations && give_up(result.iterations, result.relative_residual)) {
+      result.abandoned = true;
+      break;
+    }
     V.col(k) = ws->w / after;
   }
   // y = H^-1 rhs (upper triangular k x k), x = P^-1 V y = Z y.
@@ -129,6 +139,14 @@ GmresResult gmres(const Apply& apply, const Precondition& precondition, const Ei
   x->noalias() = ws->preconditioned.leftCols(k) * ws->coefficients.head(k);
   if (result.relative_residual <= relative_tolerance) result.converged = true;
   return result;
+}
+
+template <class Apply, class Precondition>
+GmresResult gmres(const Apply& apply, const Precondition& precondition, const Eigen::VectorXd& b,
+                  const Eigen::VectorXd& scale, double relative_tolerance, int max_iterations,
+                  GmresWorkspace* ws, Eigen::VectorXd* x) {
+  return gmres(apply, precondition, b, scale, relative_tolerance, max_iterations, ws, x,
+               [](int, double) { return false; });
 }
 
 }  // namespace stiffsim
