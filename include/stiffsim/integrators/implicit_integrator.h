@@ -365,6 +365,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // A factorization formed for a step more than this factor away from the
   // current one is refactored before its first use (refresh_matrices).
   static constexpr double kReuseStepRatio = 4.0;
+  // The Krylov path's Newton iteration budget, in max_newton_iterations
+  // (see newton()).
+  static constexpr int kKrylovIterationFactor = 5;
   // Halvings of a Newton step before the iteration counts as diverged.
   static constexpr int kMaxBacktracks = 8;
   // The Krylov path's line search compares a trial's residual with the
