@@ -33,8 +33,10 @@ enum class ImplicitErrorEstimate {
 
 // How a Newton iteration solves its linear systems (DESIGN.md section 2).
 enum class NewtonSolve {
-  // kKrylov where the iteration matrix is symmetric and factored by a sparse
-  // Cholesky (CHOLMOD LL^T); kChord otherwise (small dense systems, IE).
+  // kRecursive on large exact trees (VIE); otherwise each solve starts on
+  // kChord or kKrylov, whichever cost less lately, where the iteration
+  // matrix is factored sparse (CHOLMOD or UMFPACK); kChord for small dense
+  // systems.
   kAuto,
   kChord,   // the reuse ladder: the last factorization is the Newton matrix
   kKrylov,  // GMRES on the exact Jacobian at the iterate, preconditioned by the last factorization
@@ -385,10 +387,10 @@ class ImplicitIntegrator : public IntegratorBase {
   };
   IterationMatrix matrices_[2];
   int active_ = 0;
-  // Krylov path state: chosen once per run; the cost model compares the CG
-  // time spent since the last factorization beyond one preconditioner solve
-  // per Newton iteration (what a fresh factorization would have cost in
-  // solves) with the measured time of that factorization.
+  // Krylov path state: chosen once per run; the cost model compares the
+  // GMRES time spent since the last factorization beyond one product per
+  // converged solve (what a fresh factorization would have cost in
+  // products) with the measured time of that factorization.
   // Why the next factorization happens, for the stats.
   enum class FactorReason { kLadder, kFirst, kCostModel, kKrylovFailed };
   FactorReason factor_reason_ = FactorReason::kLadder;

@@ -116,7 +116,7 @@ struct IntegratorReport {
   std::string jacobian_scheme;         // empty for explicit methods
   int jacobian_colours = 0;            // finite differences: column groups of the pattern
   std::string newton_form;             // "mass-matrix" or "generic"
-  std::string newton_solve;            // "chord", "krylov" or "fresh"
+  std::string newton_solve;            // "chord", "krylov", "fresh" or "recursive"
   std::string newton_solve_reason;     // why
   std::string linear_solver;           // method in use
   std::string linear_solver_reason;    // why it was chosen
