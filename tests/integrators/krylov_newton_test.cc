@@ -9,6 +9,7 @@
 
 #include "stiffsim/integrators/implicit_euler.h"
 #include "stiffsim/integrators/velocity_implicit_euler.h"
+#include "stiffsim/model/articulated.h"
 #include "stiffsim/model/compliant.h"
 #include "stiffsim/model/rigid_tree.h"
 #include "test_systems.h"
@@ -80,6 +81,40 @@ TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
 TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(12, 1e6);
   expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
+}
+
+TEST(KrylovNewton, SmallSystemsWithAConstantMassMatrixGoSparse) {
+  // An 8x8 cloth: 186 unknowns, 17% of the Newton matrix nonzero, M
+  // constant: sparse, and on the deterministic chord.
+  const auto cloth8 = cloth(8, 1e3);
+  auto vie = make(Method::kVie, *cloth8, 1.0 / 60, 1e-3, NewtonSolve::kAuto);
+  vie->initialize(cloth8->initial_state());
+  vie->integrate_to(0.1);
+  IntegratorReport r = vie->report();
+  EXPECT_EQ(r.linear_solver.rfind("cholmod", 0), 0u) << r.linear_solver << r.linear_solver_reason;
+  EXPECT_NE(r.linear_solver_reason.find("n = 186 <= 200 and density 17"), std::string::npos)
+      << r.linear_solver_reason;
+  EXPECT_EQ(r.newton_solve, "chord");
+  EXPECT_NE(r.newton_solve_reason.find("small system (n = 186 <= 200)"), std::string::npos)
+      << r.newton_solve_reason;
+  EXPECT_EQ(vie->statistics().krylov_solves, 0);
+  // Asked for, the Krylov path runs on that factor all the same.
+  auto krylov = make(Method::kVie, *cloth8, 1.0 / 60, 1e-3, NewtonSolve::kKrylov);
+  krylov->initialize(cloth8->initial_state());
+  krylov->integrate_to(0.1);
+  EXPECT_EQ(krylov->report().newton_solve, "krylov");
+  EXPECT_GT(krylov->statistics().krylov_solves, 0);
+  // An exact chain of 10 links: M(q) dense, so the dense chord stays.
+  const RigidTree tree = make_chain_tree(10);
+  ArticulatedOptions options;
+  options.initial_q = Eigen::VectorXd::Constant(10, 0.3);
+  const ArticulatedSystem chain(tree, options);
+  auto chain_vie = make(Method::kVie, chain, 1e-3, 1e-3, NewtonSolve::kAuto);
+  chain_vie->initialize(chain.initial_state());
+  chain_vie->integrate_to(0.01);
+  r = chain_vie->report();
+  EXPECT_EQ(r.linear_solver.rfind("dense", 0), 0u) << r.linear_solver;
+  EXPECT_EQ(r.newton_solve, "chord");
 }
 
 TEST(KrylovNewton, CompliantChainWithQuaternionsEqualsFreshDirectSolves) {

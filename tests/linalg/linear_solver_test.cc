@@ -504,6 +504,28 @@ TEST(AutoChoiceTest, SmallSystemsGoDense) {
   EXPECT_NE(unsymmetric.reason.find("unsymmetric"), std::string::npos) << unsymmetric.reason;
 }
 
+TEST(AutoChoiceTest, SmallSparseSystemsGoSparseWhenChosenByDensity) {
+  // n = 196; 5 n - 4 m = 924 entries, density 924 / 196^2 = 2.41%.
+  const SparseMatrix A = random_spd(14, 50);
+  LinearSolverChoice symmetric =
+      make_linear_solver(LinearSolverKind::kAuto, A, true, SmallSystems::kByDensity);
+  EXPECT_EQ(symmetric.solver->method(), "cholmod-llt");
+  EXPECT_NE(symmetric.reason.find("n = 196 <= 200 and density 2.41% <= 50%"), std::string::npos)
+      << symmetric.reason;
+  // Unsymmetric small systems stay dense (UMFPACK's overhead).
+  LinearSolverChoice unsymmetric =
+      make_linear_solver(LinearSolverKind::kAuto, A, false, SmallSystems::kByDensity);
+  EXPECT_EQ(unsymmetric.solver->method(), "dense-lu");
+  // Denser than half: dense all the same.
+  PatternBuilder builder(60, 60);
+  builder.add_block(0, 0, 60, 60);
+  const SparseMatrix full_pattern = builder.build();
+  LinearSolverChoice full =
+      make_linear_solver(LinearSolverKind::kAuto, full_pattern, true, SmallSystems::kByDensity);
+  EXPECT_EQ(full.solver->method(), "dense-ldlt");
+  EXPECT_NE(full.reason.find("> 50%"), std::string::npos) << full.reason;
+}
+
 TEST(AutoChoiceTest, LargeSparseSystemsGoToCholmodOrUmfpack) {
   // n = 1024; 5 n - 4 m = 4992 entries, density 4992 / 1024^2 = 0.476%.
   const SparseMatrix A = random_spd(32, 51);

@@ -300,7 +300,7 @@ class ImplicitIntegrator : public IntegratorBase {
                         const Eigen::VectorXd& rhs, double forcing, bool may_abandon,
                         Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
-  void choose_newton_solve();
+  void choose_newton_solve(long unknowns);
   // Jacobian at the iterate x itself (full Newton, the Krylov path); marks
   // it stale for the reuse ladder.
   void compute_jacobian_at_iterate(double tf, double h, const Eigen::VectorXd& x0,

@@ -77,14 +77,25 @@ struct LinearSolverChoice {
   std::string reason;  // why this solver was picked, for the stats
 };
 
+// make_linear_solver's bound on small systems (see SmallSystems).
+inline constexpr long kSmallSystemMaxSize = 200;
+
+// How kAuto treats systems of at most kSmallSystemMaxSize unknowns.
+enum class SmallSystems {
+  kDense,      // always dense
+  kByDensity,  // symmetric ones dense only when nnz / n^2 > 50%
+};
+
 // Picks and constructs a solver; the caller then calls analyze(pattern). For
-// kAuto: dense (LDLT if `symmetric`, else LU) when n <= 200 or nnz / n^2 > 10%,
+// kAuto: dense (LDLT if `symmetric`, else LU) when n <= 200 (with
+// SmallSystems::kByDensity and `symmetric`: n <= 200 and nnz / n^2 > 50%) or
+// nnz / n^2 > 10%,
 // else CHOLMOD when `symmetric` (values symmetric and expected positive
 // definite), UMFPACK otherwise. Explicit kinds are honoured as asked.
 // `symmetric` must be true for kCholmod and kDenseLDLT (std::invalid_argument
 // otherwise). Store both triangles of a symmetric A: CHOLMOD and dense LDLT read
 // only the lower one, but CHOLMOD's UMFPACK fallback reads all of A.
 LinearSolverChoice make_linear_solver(LinearSolverKind kind, const SparseMatrix& pattern,
-                                      bool symmetric);
+                                      bool symmetric, SmallSystems small = SmallSystems::kDense);
 
 }  // namespace stiffsim
