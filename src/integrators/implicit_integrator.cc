@@ -216,10 +216,10 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   IterationMatrix& m = matrices_[active_];
   m.h = h;
   if (!m.solver.solver) {
-    // Small systems with a constant mass matrix (particles, compliant
-    // chains) are banded or grid-like: sparse unless their pattern is dense.
-    // Exact trees, whose M(q) fills in along each branch, keep the dense
-    // chord below 200 unknowns (see choose_newton_solve()).
+    // Small symmetric systems with a constant mass matrix (particles) are
+    // banded or grid-like: sparse unless their pattern is dense. Exact
+    // trees, whose M(q) fills in along each branch, keep the dense chord
+    // below 200 unknowns (see choose_newton_solve()).
     m.solver = make_linear_solver(
         implicit_.linear_solver, matrix, symmetric,
         caps_.constant_mass_matrix ? SmallSystems::kByDensity : SmallSystems::kDense);
