@@ -347,7 +347,8 @@ bool VelocityImplicitEuler::do_step(double h) {
     const double scale = step_error_h_ > 0.0 ? (h / step_error_h_) * (h / step_error_h_) : 0.0;
     use_step_error_tolerance(has_prediction ? scale * step_error_ : 0.0);
     const Eigen::VectorXd& guess = krylov_path() || structured() ? predicted : state_.x;
-    const bool solved = solve_step(state_.t, h, state_.x, guess, &candidate_);
+    const bool solved = solve_step(state_.t, h, state_.x, guess, &candidate_) &&
+                        keep_lowest_root(state_.t, h, state_.x, &candidate_);
     if (solved && has_prediction) {
       const int nq = dims_.nq, nv = dims_.nv;
       step_error_ =

@@ -196,6 +196,9 @@ class VieWithGuess : public VelocityImplicitEuler {
   bool solve_from(double h, const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
     return solve_step(state().t, h, state().x, guess, x);
   }
+  bool keep_lowest(double h, Eigen::VectorXd* x) {
+    return keep_lowest_root(state().t, h, state().x, x);
+  }
 };
 
 TEST(VelocityImplicitEuler, EnergyCriterionAcceptsTheGenuineRootThatGainsEnergy) {
@@ -221,7 +224,9 @@ TEST(VelocityImplicitEuler, EnergyCriterionAcceptsTheGenuineRootThatGainsEnergy)
     const double gain = (sys->energy(vie.state()) - e0) / e0;
     EXPECT_GT(gain, h == 0.01 ? 3e-4 : 5e-6) << "h = " << h;
     EXPECT_LT(gain, h == 0.01 ? 5e-4 : 1e-5) << "h = " << h;
-    EXPECT_EQ(st.energy_guard_checks, 1) << "h = " << h;
+    // Three: the step, and the two half steps keep_lowest_root() compared
+    // it with (they gain energy too), all accepted.
+    EXPECT_EQ(st.energy_guard_checks, 3) << "h = " << h;
     EXPECT_EQ(st.energy_guard_rejections, 0) << "h = " << h;
     EXPECT_EQ(st.substep_failures, 0) << "h = " << h;
   }
@@ -251,6 +256,60 @@ TEST(VelocityImplicitEuler, EnergyCriterionRejectsASaddleRoot) {
   ASSERT_TRUE(vie.solve_from(h, s0.x, &x));
   EXPECT_LT((x - spring.step(s0, h, +1)).lpNorm<Eigen::Infinity>(), 1e-10);
   EXPECT_EQ(vie.statistics().energy_guard_rejections, rejections);
+}
+
+TEST(VelocityImplicitEuler, EnergyCriterionReplacesAMinimizerOfGThatIsNotTheStep) {
+  // A particle (mass 1, no gravity) held by two very stiff springs
+  // (k = 1e9) from anchors at x = -1 and x = 1, so it moves on a circle of
+  // radius 1/2 about the x axis, and by a softer spring (k = 1e7) from an
+  // anchor at z = -1 below that circle. It rests where every spring has
+  // its rest length, at 60 degrees from the circle's bottom. The mirror
+  // image of that point across the y = 0 plane has the same spring
+  // lengths, so the step's incremental potential G has a second minimizer
+  // there (h = 0.01, where the springs hold it against m / h^2): a root
+  // moving at 87 m/s that gains 3,750 J. The criterion of
+  // passes_energy_guard() accepts it: its Hessian is definite, and the
+  // stiff springs, compressed between the two points, bound the gain by
+  // about 1e8 J. Two half steps from the start stay put; their end is a
+  // far lower point of G, so it replaces the root.
+  const double h = 0.01, radius = 0.5, angle = M_PI / 3;
+  ParticleDescription d;
+  d.name = "hinge";
+  const Eigen::Vector3d rest(0, radius * std::sin(angle), -radius * std::cos(angle));
+  d.positions = {Eigen::Vector3d(-1, 0, 0), Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 0, -1),
+                 rest};
+  d.masses = {1.0, 1.0, 1.0, 1.0};
+  const double stretch = (rest - d.positions[0]).norm(), lower = (rest - d.positions[2]).norm();
+  d.springs = {Spring{0, 3, stretch, 1e9, 0.0}, Spring{1, 3, stretch, 1e9, 0.0},
+               Spring{2, 3, lower, 1e7, 0.0}};
+  d.pinned = {0, 1, 2};
+  d.gravity.setZero();
+  ParticleSystem sys(d);
+  const State s0 = sys.initial_state();
+  const double e0 = sys.energy(s0);
+  ASSERT_EQ(e0, 0.0);
+  VieWithGuess vie(sys, fixed(h, false, 1e-8), ImplicitSettings{});
+  vie.initialize(s0);
+  Eigen::VectorXd mirror(6), x(6);
+  mirror.head(3) = Eigen::Vector3d(0, -rest.y(), rest.z());
+  mirror.tail(3) = (mirror.head(3) - rest) / h;
+  ASSERT_TRUE(vie.solve_from(h, mirror, &x));
+  // Converged near the mirror image, and accepted by the other tests.
+  EXPECT_LT((x.head(3) - mirror.head(3)).norm(), 1e-3);
+  EXPECT_GT(sys.energy(State(h, x)), 3000.0);
+  EXPECT_GT(vie.statistics().energy_guard_checks, 0);
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
+
+  ASSERT_TRUE(vie.keep_lowest(h, &x));
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, 1);
+  // The step is now that of two fixed half steps from the start, taken by
+  // another integrator: the particle at rest where it was.
+  VelocityImplicitEuler halves(sys, fixed(h / 2, false, 1e-8), ImplicitSettings{});
+  halves.initialize(s0);
+  halves.integrate_to(h);
+  EXPECT_LT((x - halves.state().x).lpNorm<Eigen::Infinity>(), 1e-12);
+  EXPECT_LT((x - s0.x).lpNorm<Eigen::Infinity>(), 1e-12);
+  EXPECT_LE(sys.energy(State(h, x)), 1e-9);
 }
 
 TEST(VelocityImplicitEuler, EnergyCriterionRejectsNothingWhereNoRootIsSpurious) {

@@ -87,7 +87,9 @@ struct ImplicitSettings {
   // rose is examined: it is rejected as a spurious root when it is a saddle
   // of the incremental potential (M - h D - h^2 K not positive definite) or
   // when it gained more than implicit Euler's O(h^2) gain allows (see
-  // passes_energy_guard()).
+  // passes_energy_guard()); at fixed steps without an error estimate it is
+  // also compared with two half steps and replaced by their end where that
+  // is a lower point of the incremental potential (keep_lowest_root()).
   bool energy_guard = true;
   // Fixed steps without an error estimate (VIE): a Newton solve converges to
   // kappa times the larger of the accuracy and the step's own local error
@@ -238,6 +240,14 @@ class ImplicitIntegrator : public IntegratorBase {
   // 2 x_small - x_big), the error is x_big - x_small. The full step's work
   // counts as the error estimator's (as in Drake).
   bool step_doubling(double h);
+  // Fixed steps without an error estimate: whether the converged step *x of
+  // size h from (t0, x0) is the step's root, or a root of the step
+  // equations the minimizer of G is not (see the definition). Consulted
+  // only where the step gained energy beyond round-off; then two half
+  // steps are solved (into x_half_, x_small_: not within step_doubling())
+  // and where their end is a lower point of G, it replaces *x (counted in
+  // energy_guard_rejections). False when the half steps fail.
+  bool keep_lowest_root(double t0, double h, const Eigen::VectorXd& x0, Eigen::VectorXd* x);
   // The Newton tolerance of the three solves of an extrapolating step of
   // size h.
   double extrapolation_newton_tolerance(double h) const;
