@@ -11,11 +11,11 @@
 namespace stiffsim {
 namespace {
 
-// Below this size a dense factorization beats the symbolic bookkeeping of a
-// sparse one; above this density the fill-in makes the factor dense anyway.
-constexpr long kDenseMaxSize = kSmallSystemMaxSize;
+// Up to kSmallSystemMaxSize unknowns a dense factorization beats the
+// symbolic bookkeeping of a sparse one; above this density the fill-in makes
+// the factor dense anyway.
 constexpr double kDenseMinDensity = 0.1;
-// SmallSystems::kByDensity (symmetric matrices): below kDenseMaxSize a
+// SmallSystems::kByDensity (symmetric matrices): below kSmallSystemMaxSize a
 // pattern denser than this stays dense. A factorization reused over many
 // steps makes the solves the cost, and CHOLMOD's factor of a banded or grid
 // pattern is a fraction of the dense one. VIE under error control, medians
@@ -119,19 +119,20 @@ LinearSolverChoice make_linear_solver(LinearSolverKind kind, const SparseMatrix&
   const std::string size = "n = " + std::to_string(n);
   const std::string fill = "density " + format_percent(density);
   const bool by_density = small == SmallSystems::kByDensity && symmetric;
-  const bool small_dense = n <= kDenseMaxSize && (!by_density || density > kSmallDenseMinDensity);
-  const bool dense = n <= kDenseMaxSize ? small_dense : density > kDenseMinDensity;
+  const bool small_dense =
+      n <= kSmallSystemMaxSize && (!by_density || density > kSmallDenseMinDensity);
+  const bool dense = n <= kSmallSystemMaxSize ? small_dense : density > kDenseMinDensity;
   std::string why;
-  if (n <= kDenseMaxSize && by_density) {
-    why = size + " <= " + std::to_string(kDenseMaxSize) + " and " + fill +
+  if (n <= kSmallSystemMaxSize && by_density) {
+    why = size + " <= " + std::to_string(kSmallSystemMaxSize) + " and " + fill +
           (small_dense ? " > " : " <= ") + format_percent(kSmallDenseMinDensity);
-  } else if (n <= kDenseMaxSize) {
-    why = size + " <= " + std::to_string(kDenseMaxSize);
+  } else if (n <= kSmallSystemMaxSize) {
+    why = size + " <= " + std::to_string(kSmallSystemMaxSize);
   } else if (dense) {
-    why = size + " > " + std::to_string(kDenseMaxSize) + " but " + fill + " > " +
+    why = size + " > " + std::to_string(kSmallSystemMaxSize) + " but " + fill + " > " +
           format_percent(kDenseMinDensity);
   } else {
-    why = size + " > " + std::to_string(kDenseMaxSize) + " and " + fill +
+    why = size + " > " + std::to_string(kSmallSystemMaxSize) + " and " + fill +
           " <= " + format_percent(kDenseMinDensity);
   }
   LinearSolverKind picked;
