@@ -44,6 +44,10 @@ struct IntegratorStatistics {
   // Extrapolated steps (vie2, ie2) that would have gained energy in a
   // passive scene and propagated the half-step result instead.
   long extrapolation_rejections = 0;
+  // Fixed VIE steps whose Newton iteration started from the step's start
+  // rather than from the predictor, which was a higher point of the
+  // incremental potential (see VelocityImplicitEuler::first_iterate()).
+  long predictor_declined = 0;
   long velocity_map_evaluations = 0;  // N(q) products and assemblies (0 when N = I)
   long mass_matrix_assemblies = 0;    // 1 for a constant M
   long symbolic_analyses = 0;         // sparse orderings / elimination trees

@@ -64,9 +64,14 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
                                double h);
   // The damping matrix at the current iterate that enters the potential.
   void evaluate_damping(double t, const Eigen::VectorXd& x);
+  // The first Newton iterate of a fixed step of size h from the current
+  // state, given the predictor's: whichever of it and the step's start
+  // (v = v_n) is the lower point of the incremental potential.
+  const Eigen::VectorXd& first_iterate(double h, const Eigen::VectorXd& predicted);
   const double* mass_diagonal_ = nullptr;
   bool use_potential_merit_ = false;
   Eigen::VectorXd predicted_;  // predictor()'s result
+  Eigen::VectorXd start_iterate_;  // first_iterate()'s v = v_n
   // Fixed steps without an estimate: the last step's local error estimate
   // |v - v_pred| / 2 (see do_step()) and the step it was taken with.
   double step_error_ = 0.0, step_error_h_ = 0.0;
