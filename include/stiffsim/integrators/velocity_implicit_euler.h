@@ -59,9 +59,10 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   double potential_roundoff(double g) const override;
 
  private:
-  // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v.
+  // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v,
+  // or without its last term (damping false: no damping matrix needed).
   double incremental_potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
-                               double h);
+                               double h, bool damping = true);
   // The damping matrix at the current iterate that enters the potential.
   void evaluate_damping(double t, const Eigen::VectorXd& x);
   // The first Newton iterate of a fixed step of size h from the current
