@@ -1206,9 +1206,9 @@ bool ImplicitIntegrator::keep_lowest_root(double t0, double h, const Eigen::Vect
   if (!guard_energy_ || energy_guard_suspended_ || !has_potential()) return true;
   double allowance = 0.0;
   if (energy_gain(x0, *x, &allowance) <= allowance) return true;
-  const double g_root = potential(t0 + h, x0, *x, h, true);
   if (!solve_step(t0, 0.5 * h, x0, x0, &x_half_)) return false;
   if (!solve_step(t0 + 0.5 * h, 0.5 * h, x_half_, x_half_, &x_small_)) return false;
+  const double g_root = potential(t0 + h, x0, *x, h, true);
   const Dimensions& d = dims_;
   x_big_ = *x;
   x_big_.segment(d.nq, d.nv) = (x_small_.segment(0, d.nq) - x0.segment(0, d.nq)) / h;

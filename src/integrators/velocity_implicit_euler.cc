@@ -305,6 +305,10 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
 void VelocityImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {
   (void)t0, (void)h;
   if (use_potential_merit_) g_scale_ = std::abs(system_.energy(*data_, state_));
+  load_mass_diagonal(x0);
+}
+
+void VelocityImplicitEuler::load_mass_diagonal(const Eigen::VectorXd& x0) {
   mass_diagonal_ =
       caps_.diagonal_mass_matrix ? mass_matrix_at(x0.segment(0, dims_.nq)).valuePtr() : nullptr;
 }
@@ -351,7 +355,7 @@ const Eigen::VectorXd& VelocityImplicitEuler::first_iterate(double h,
   // time of the predictor alone with it, 0.84x without (medians of 5).
   if (&predicted == &state_.x || !has_potential()) return predicted;
   const double tf = state_.t + h;
-  begin_newton(state_.t, h, state_.x);
+  load_mass_diagonal(state_.x);  // all G needs here of begin_newton()
   start_iterate_ = state_.x;
   complete_iterate(h, state_.x, &start_iterate_);
   const double g_start = incremental_potential(tf, state_.x, start_iterate_, h, false);

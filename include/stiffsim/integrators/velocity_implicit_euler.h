@@ -65,6 +65,8 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
                                double h, bool damping = true);
   // The damping matrix at the current iterate that enters the potential.
   void evaluate_damping(double t, const Eigen::VectorXd& x);
+  // mass_diagonal_ for the step from x0 (nullptr unless M is diagonal).
+  void load_mass_diagonal(const Eigen::VectorXd& x0);
   // The first Newton iterate of a fixed step of size h from the current
   // state, given the predictor's: whichever of it and the step's start
   // (v = v_n) is the lower point of the incremental potential.
