@@ -70,6 +70,17 @@ struct JacobianRequest {
   // h^2 K, and without it a chain's Newton converges linearly (rate ~0.2).
   // Systems with a constant mass matrix ignore it.
   const double* acceleration = nullptr;
+  // When set (nq positions p), each spring's tension T in the transverse
+  // stiffness T/l (I - u u^T) is estimated from p rather than taken as
+  // k (l - L) at q: k (l_p - L), or with tension_carried the tension at p
+  // carried to q along p's direction, k (u_p . d - L). This is the
+  // primal-dual estimate of a stiff spring's force (Tournier et al. 2015,
+  // "Stable constrained dynamics"): Newton on (v, lambda) updates lambda by
+  // the linearized length, where k (l - L) at a new iterate counts the
+  // second-order stretch of its transverse motion, k theta^2 L / 2, as
+  // tension. Only for iteration matrices: the residual stays exact.
+  const double* tension_positions = nullptr;
+  bool tension_carried = false;
 };
 
 // The workspace of a System's evaluations: a System is an immutable model,

@@ -173,6 +173,10 @@ void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd
   const auto start = WallClock::now();
   JacobianRequest request;
   request.definite = implicit_.definite_iteration_matrix;
+  if (estimate_tensions_) {
+    request.tension_positions = tension_positions_.data();
+    request.tension_carried = tension_carried_;
+  }
   if (!caps_.constant_mass_matrix && dims_.nv > 0 && iterate_acceleration_) {
     request.acceleration = inertial_acceleration_.data();
   } else if (!caps_.constant_mass_matrix && dims_.nv > 0) {
@@ -319,7 +323,10 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   const int nx = dims_.nx();
   newton_solve_chosen_ = structured_ != nullptr;
   krylov_ = refactor_due_ = refactor_first_ = refactor_failed_ = false;
-  start_costs_[0] = start_costs_[1] = StartCost{};
+  for (StartCost& c : start_costs_) c = StartCost{};
+  last_explored_ = kKrylovStart;  // the first exploration tries the fresh start
+  tension_positions_.resize(dims_.nq);
+  estimate_tensions_ = tension_carried_ = false;
   solves_since_exploration_ = 0;
   exploration_interval_ = kStartExploration;
   last_best_ = kChordStart;
@@ -435,6 +442,18 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // h.
   const bool krylov = trial == kKrylovTrial && !implicit_.full_newton;
   const bool structured = trial == kStructuredTrial;
+  // Full Newton searches on G wherever its last rung does: a fresh matrix
+  // per iterate costs more than G's damping evaluation.
+  const bool search_on_g = !krylov && potential_search(full_newton ? kFullNewtonTrial : trial);
+  tension_positions_ = x0.segment(0, dims_.nq);
+  tension_carried_ = false;
+  // Only at fixed steps (large ones: under error control a step's
+  // transverse motion, and so the second-order stretch the estimate leaves
+  // out, is small) and where the search is on G, which keeps the iteration
+  // a descent on G whatever the matrix. With the estimate on every direct
+  // rung (searches on |r| too), models/box_on_rope.yaml took a halving and
+  // a 3-node rope under error control a path to an energy-guard rejection.
+  estimate_tensions_ = implicit_.tension_estimate && settings_.fixed_step && search_on_g;
   if (structured) {
     // factored at every iterate below
   } else if (krylov) {
@@ -567,7 +586,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // The Krylov path is globalized from its first iteration on the
     // residual merit: an inexact Newton direction with forcing < 1 on the
     // true Jacobian descends it (Eisenstat & Walker 1994).
-    const bool use_potential = !krylov && potential_search(trial);
+    const bool use_potential = search_on_g;
     double g_current = 0.0, slope = 0.0;
     if (use_potential) {
       // G itself is only needed by a search.
@@ -629,6 +648,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       continue;
     }
     dx_ = x_trial_ - *x;
+    tension_positions_ = x->segment(0, dims_.nq);
+    tension_carried_ = true;
     x->swap(x_trial_);
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);
@@ -858,6 +879,7 @@ void ImplicitIntegrator::use_step_error_tolerance(double local_error) {
 bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& x0,
                                     const Eigen::VectorXd& guess, Eigen::VectorXd* x) {
   ++stats_.newton_solves;
+  estimate_tensions_ = false;  // until a direct solve begins
   // The rungs to climb. The chord ladder: reuse (1), refactor (2), fresh
   // Jacobian (3), full Newton (4). The Krylov path starts with its own rung
   // (the exact Jacobian at every iterate) and is the chord's last
@@ -878,7 +900,16 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   int count = 4;
   const bool auto_start = krylov_ && implicit_.newton_solve == NewtonSolve::kAuto;
   const int start = krylov_ ? (auto_start ? choose_start() : kKrylovStart) : kChordStart;
-  if (start == kKrylovStart) {
+  if (start == kFreshStart) {
+    // Full Newton on the direct path: a fresh Jacobian and factorization at
+    // every iterate, with the springs' tension estimate and the search on
+    // G. Where stiff springs dominate (cloth_stiff.yaml) that estimate
+    // makes Newton converge in a few iterations where the exact Jacobian
+    // needs tens, so the fresh start beats a Krylov start there.
+    rungs[0] = kFullNewtonTrial;
+    count = 1;
+    ++stats_.fresh_first_solves;
+  } else if (start == kKrylovStart) {
     // No full-Newton rung after a failed Krylov solve: that path already
     // iterates on the exact Jacobian with a preconditioner refactored at
     // the iterate whenever a direction fails, so full Newton repeats it at
@@ -955,17 +986,34 @@ int ImplicitIntegrator::choose_start() {
   if (last_jacobian_seconds_ > last_factorization_seconds_ && last_factorization_seconds_ > 0.0) {
     return kChordStart;
   }
-  // Untried starts are tried first (the chord before Krylov); then the
-  // cheaper per simulated second, with the other one tried every
-  // kStartExploration solves so a change of regime is noticed.
+  // The reuse starts are tried first (the chord, then Krylov); then the
+  // cheapest per simulated second, with the others tried in turn every
+  // kStartExploration solves so a change of regime is noticed. The fresh
+  // start waits for the first exploration: at a run's start every step is
+  // easy, and a sample from there made it look cheap (a 100x100 sheet paid
+  // a factorization per iteration for it).
   for (int s : {kChordStart, kKrylovStart}) {
     if (start_costs_[s].solves == 0) return s;
   }
   auto cost = [](const StartCost& c) {
     return c.simulated > 0.0 ? c.seconds / c.simulated : std::numeric_limits<double>::infinity();
   };
-  const int best = cost(start_costs_[kKrylovStart]) < cost(start_costs_[kChordStart]) ? kKrylovStart
-                                                                                      : kChordStart;
+  int best = cost(start_costs_[kKrylovStart]) < cost(start_costs_[kChordStart]) ? kKrylovStart
+                                                                                : kChordStart;
+  // The fresh start must cost less than kFreshStartMargin of the better
+  // reuse start. Its cost is often the stale sample of an easy phase (the
+  // sheet's first steps converge in two iterations whatever the matrix),
+  // and where it loses it loses by 2x or more (cloth.yaml: a fresh start
+  // costs twice a Krylov start's time per step); where it wins it wins by
+  // as much (cloth_stiff.yaml: 0.25-0.85 of a Krylov start's recent cost).
+  // Without the margin, cloth.yaml at a fixed 1/60 took 22 fresh starts in
+  // one run of three, and 1.4x the time. The fresh start exists where the
+  // tension estimate does (fixed steps); error control keeps two starts.
+  const int starts = settings_.fixed_step && implicit_.tension_estimate ? kStarts : 2;
+  if (starts == kStarts &&
+      cost(start_costs_[kFreshStart]) < kFreshStartMargin * cost(start_costs_[best])) {
+    best = kFreshStart;
+  }
   // An exploration that lost doubles the interval to the next one (up to
   // 16 times the shortest), so a start many times costlier than the other
   // (the Krylov path on a chain of small dense bodies) is rarely paid for.
@@ -979,7 +1027,9 @@ int ImplicitIntegrator::choose_start() {
   if (++solves_since_exploration_ >= exploration_interval_) {
     solves_since_exploration_ = 0;
     explored_ = true;
-    return 1 - best;
+    last_explored_ = (last_explored_ + 1) % starts;
+    if (last_explored_ == best) last_explored_ = (last_explored_ + 1) % starts;
+    return last_explored_;
   }
   return best;
 }

@@ -337,13 +337,17 @@ void ParticleSystem::force_jacobians(SystemData&, double t, const ConstVectorRef
     D[diagonal_slots_[i]] = -desc_.drag * free_mass_[i];
 
   long approximated = 0;
+  const Eigen::Map<const Eigen::VectorXd> tension_q(
+      request.tension_positions ? request.tension_positions : q.data(), q.size());
   for_each_element_set([&](const auto& set) {
     constexpr int n = std::decay_t<decltype(set)>::kNodes;
-    Eigen::Vector3d x[n], vel[n];
+    Eigen::Vector3d x[n], vel[n], x_tension[n], v_unused[n];
     Eigen::Matrix3d Kb[n * n], Db[n * n];
     for (size_t k = 0; k < set.elements.size(); ++k) {
       if (!gather(set.elements[k], t, q, v, x, vel)) continue;
-      set.elements[k].jacobian_blocks(x, vel, request, Kb, Db, &approximated);
+      if (request.tension_positions) gather(set.elements[k], t, tension_q, v, x_tension, v_unused);
+      set.elements[k].jacobian_blocks(x, vel, request.tension_positions ? x_tension : nullptr,
+                                      request, Kb, Db, &approximated);
       const auto& slots = set.slots[k];
       for (int blk = 0; blk < n * n; ++blk) {
         const int* bs = &slots[9 * blk];

@@ -38,6 +38,7 @@ SpringElement::SpringElement(const Spring& spring, std::size_t index, int nodes,
 }
 
 void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
+                                    const Eigen::Vector3d* x_tension,
                                     const JacobianRequest& request, Eigen::Matrix3d* K,
                                     Eigen::Matrix3d* D, long* approximated) const {
   const Spring& sp = spring_;
@@ -54,6 +55,14 @@ void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vecto
     if (request.definite && sp.rest_length > 0.0 && sp.k > 0.0) ++*approximated;
   } else {
     double transverse = 1.0 - sp.rest_length / f.l;
+    if (x_tension) {
+      const SpringFrame<double> p = spring_frame(x_tension[0], x_tension[1]);
+      // A spring collapsed at p has no direction to carry its tension along.
+      if (!p.collapsed) {
+        const double reach = request.tension_carried ? p.u.dot(f.l * f.u) : p.l;
+        transverse = (reach - sp.rest_length) / f.l;
+      }
+    }
     if (request.definite && transverse < 0.0) {
       // Choi & Ko 2002: a compressed spring's negative transverse stiffness
       // can make -K indefinite; the iteration matrix drops it.

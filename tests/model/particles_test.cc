@@ -231,6 +231,48 @@ TEST(ParticleSystem, SpringForcesAreEqualAndOppositeAlongTheAxis) {
   EXPECT_TRUE(F.tail<3>().isApprox(-Vector3d(1.2, 1.6, 0.0), 1e-14));
 }
 
+TEST(ParticleSystem, TensionEstimateReplacesOnlyTheTransverseStiffness) {
+  // One spring, a at the origin (pinned: K is b's 3x3 block), b at (3, 4, 0):
+  // l = 5, L = 4, k = 2, u = (3, 4, 0)/5. The reference puts b at (5, 0, 0):
+  // l_p = 5, u_p = (1, 0, 0), so u_p . d = 3. The exact transverse
+  // stiffness is k (l - L)/l = 0.4; the estimate gives k (l_p - L)/l = 0.4
+  // as well, and carried k (u_p . d - L)/l = -0.4, which the definite
+  // request clamps to 0. The axial term k u u^T never changes.
+  ParticleDescription d;
+  d.name = "pair";
+  d.positions = {Vector3d(0, 0, 0), Vector3d(3, 4, 0)};
+  d.masses = {1.0, 1.0};
+  d.springs = {Spring{0, 1, 4.0, 2.0, 0.0}};
+  d.pinned = {0};
+  d.gravity.setZero();
+  const ParticleSystem sys(d);
+  const VectorXd q = sys.initial_state().q(sys.dimensions());
+  const VectorXd v = VectorXd::Zero(3);
+  const Vector3d p_b(5.0, 0.0, 0.0);
+  const Vector3d u(0.6, 0.8, 0.0);
+  const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - u * u.transpose();
+  auto block = [&](const double* positions, bool carried, bool definite) {
+    ForceJacobians J = sys.jacobian_pattern();
+    JacobianRequest request;
+    request.definite = definite;
+    request.tension_positions = positions;
+    request.tension_carried = carried;
+    sys.force_jacobians(0.0, q, v, VectorXd(), request, &J);
+    return std::make_pair(Eigen::Matrix3d(MatrixXd(J.dF_dq)), J.approximated_terms);
+  };
+  const Eigen::Matrix3d axial = -2.0 * u * u.transpose();
+  EXPECT_TRUE(block(nullptr, false, false).first.isApprox(axial - 0.4 * P, 1e-14));
+  EXPECT_TRUE(block(p_b.data(), false, false).first.isApprox(axial - 0.4 * P, 1e-14));
+  EXPECT_TRUE(block(p_b.data(), true, false).first.isApprox(axial + 0.4 * P, 1e-14));
+  const auto clamped = block(p_b.data(), true, true);
+  EXPECT_TRUE(clamped.first.isApprox(axial, 1e-14));
+  EXPECT_EQ(clamped.second, 1);
+  // At the evaluation point itself, carried or not, the estimate is exact.
+  EXPECT_TRUE(block(q.data(), true, false).first.isApprox(axial - 0.4 * P, 1e-14));
+  // The forces never see it.
+  EXPECT_TRUE(forces_at(sys, q, v).isApprox(-Vector3d(1.2, 1.6, 0.0), 1e-14));
+}
+
 TEST(ParticleSystem, CollapsedSpringGivesFiniteForcesAndJacobians) {
   ParticleDescription d;
   d.name = "zero";

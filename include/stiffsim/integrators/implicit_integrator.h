@@ -75,6 +75,10 @@ struct ImplicitSettings {
   // after a failed solve).
   double max_forcing = 0.1;
   bool reuse = true;  // false: fresh Jacobian and factorization every step attempt
+  // Fixed steps: the direct Newton solves that search on G form their
+  // matrices with the springs' primal-dual tension estimate
+  // (JacobianRequest::tension_positions). false: the exact tension.
+  bool tension_estimate = true;
   int max_newton_iterations = 10;
   // Newton stops when eta |dx| (or the residual) <= kappa * accuracy
   // (Hairer & Wanner IV.8; see step_error_tolerance for fixed steps); 0.05
@@ -355,7 +359,9 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr int kKrylovTrial = 5;
   // NewtonSolve::kAuto: the two ways a solve can start, the decay of their
   // measured costs per solve, and how often the costlier one is retried.
-  static constexpr int kChordStart = 0, kKrylovStart = 1;
+  static constexpr int kChordStart = 0, kKrylovStart = 1, kFreshStart = 2;
+  static constexpr int kStarts = 3;
+  static constexpr double kFreshStartMargin = 0.8;  // see choose_start()
   static constexpr double kStartCostDecay = 0.9;
   static constexpr int kStartExploration = 16;
   int choose_start();
@@ -435,13 +441,22 @@ class ImplicitIntegrator : public IntegratorBase {
   bool refactor_first_ = false;        // none yet, or one formed for another h
   bool refactor_failed_ = false;       // the last Krylov solve missed its tolerance
   bool preconditioner_fresh_ = false;  // factored at the current iterate
+  // The springs' tension estimate of the iteration matrices formed in a
+  // direct Newton solve that searches on G (JacobianRequest::
+  // tension_positions): the step's start until the first update, then the
+  // iterate before the last update, carried. The Krylov path's operator is
+  // the exact Jacobian, and so its preconditioner is too.
+  Eigen::VectorXd tension_positions_;
+  bool tension_carried_ = false;
+  bool estimate_tensions_ = false;
   // Decayed sums of the wall time and of the simulated time (h of solves
   // that converged) of the solves each start began.
   struct StartCost {
     double seconds = 0.0, simulated = 0.0;
     long solves = 0;
   };
-  StartCost start_costs_[2];
+  StartCost start_costs_[kStarts];
+  int last_explored_ = kChordStart;  // the costlier starts are explored in turn
   int solves_since_exploration_ = 0;
   int exploration_interval_ = kStartExploration;
   int last_best_ = kChordStart;

@@ -61,6 +61,7 @@ struct IntegratorStatistics {
   // solves that missed their tolerance within the iteration budget, and why
   // each factorization happened.
   long krylov_first_solves = 0;  // Newton solves that started on the Krylov path
+  long fresh_first_solves = 0;   // Newton solves that started with full Newton (auto)
   // Fixed steps without an error estimate: step attempts (a halved step's
   // retries included) whose Newton tolerance the step's own local error
   // set (ImplicitSettings::step_error_tolerance).

@@ -15,9 +15,11 @@
 //   void force(const Vector3<S>* x, const Vector3<S>* v, Vector3<S>* f) const;
 //       // f[i], the force on stencil node i, from positions and velocities
 //   void jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
+//                        const Eigen::Vector3d* x_tension,
 //                        const JacobianRequest& request, Eigen::Matrix3d* K,
 //                        Eigen::Matrix3d* D, long* approximated) const;
-//       // K[i * kNodes + j] = df_i/dx_j, D likewise for velocities
+//       // K[i * kNodes + j] = df_i/dx_j, D likewise for velocities;
+//       // x_tension: the stencil at request.tension_positions, or null
 //   double energy(const Eigen::Vector3d* x) const;
 
 #include <Eigen/Core>

@@ -79,10 +79,12 @@ class SpringElement {
   // from K (MODELS.md allows it: it only slows Newton down, the residual
   // stays exact), which keeps K symmetric; request.complete adds it. With
   // request.definite a compressed spring's transverse factor (1 - L/l) is
-  // clamped at 0 and counted in *approximated.
+  // clamped at 0 and counted in *approximated. With x_tension (the nodes at
+  // request.tension_positions) the transverse factor is T / (k l) for the
+  // request's tension estimate T (system.h), clamped likewise.
   void jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
-                       const JacobianRequest& request, Eigen::Matrix3d* K, Eigen::Matrix3d* D,
-                       long* approximated) const;
+                       const Eigen::Vector3d* x_tension, const JacobianRequest& request,
+                       Eigen::Matrix3d* K, Eigen::Matrix3d* D, long* approximated) const;
 
   // Inline: the energy guard and the incremental potential evaluate every
   // spring once per step or search trial, as often as the forces.
