@@ -905,9 +905,15 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     // every iterate, with the springs' tension estimate and the search on
     // G. Where stiff springs dominate (cloth_stiff.yaml) that estimate
     // makes Newton converge in a few iterations where the exact Jacobian
-    // needs tens, so the fresh start beats a Krylov start there.
+    // needs tens, so the fresh start beats a Krylov start there. A fresh
+    // start that fails goes on to the Krylov rung, as a failed chord start
+    // does, and is charged as a failure: where the damping's derivative
+    // decides (the 100x100 sheet folding), full Newton with the estimate
+    // fails, and a run that chose it on a stale sample took 8 halvings
+    // and 4x the time.
     rungs[0] = kFullNewtonTrial;
-    count = 1;
+    rungs[1] = kKrylovTrial;
+    count = 2;
     ++stats_.fresh_first_solves;
   } else if (start == kKrylovStart) {
     // No full-Newton rung after a failed Krylov solve: that path already
@@ -938,11 +944,12 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   const auto began = WallClock::now();
   bool solved = false;
   int solved_by = -1;
-  double rescue_seconds = 0.0;  // of a Krylov rung after a failed chord start
+  double rescue_seconds = 0.0;  // of a Krylov rung after a failed chord or fresh start
   for (int k = 0; k < count && !solved; ++k) {
     const auto rung_began = WallClock::now();
     solved = newton(t0, h, x0, guess, rungs[k], x);
-    if (rungs[k] == kKrylovTrial && start == kChordStart) rescue_seconds = seconds_since(rung_began);
+    if (rungs[k] == kKrylovTrial && start != kKrylovStart)
+      rescue_seconds = seconds_since(rung_began);
     if (solved) solved_by = rungs[k];
     if (!solved && !reuse_enabled()) break;
   }
@@ -950,8 +957,8 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   if (auto_start) {
     // Costs decay by half in about seven solves of that start, so the
     // choice follows the scene as it changes (a sheet that starts to fold).
-    // A chord start that the Krylov rung rescued failed: its own rungs are
-    // charged to the chord with no simulated time, the rescue to Krylov.
+    // A chord or fresh start that the Krylov rung rescued failed: its own
+    // rungs are charged to it with no simulated time, the rescue to Krylov.
     // Credited with the step instead, a chord that failed every step but
     // cost less than a Krylov start's factorizations kept being chosen
     // (cloth.yaml at 1/60 for 2 s: 13-15 Newton iterations on most steps,
@@ -964,8 +971,8 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
       ++c.solves;
     };
     const double total = seconds_since(began);
-    if (start == kChordStart && solved_by == kKrylovTrial) {
-      charge(kChordStart, total - rescue_seconds, 0.0);
+    if (start != kKrylovStart && solved_by == kKrylovTrial) {
+      charge(start, total - rescue_seconds, 0.0);
       charge(kKrylovStart, rescue_seconds, h);
     } else {
       charge(start, total, solved ? h : 0.0);
