@@ -942,6 +942,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     }
   }
   const auto began = WallClock::now();
+  const long iterations_before = stats_.newton_raphson_iterations;
   bool solved = false;
   int solved_by = -1;
   double rescue_seconds = 0.0;  // of a Krylov rung after a failed chord or fresh start
@@ -970,6 +971,12 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
       c.simulated = kStartCostDecay * c.simulated + simulated;
       ++c.solves;
     };
+    if (start == kKrylovStart) {
+      StartCost& c = start_costs_[kKrylovStart];
+      c.iterations = kStartCostDecay * c.iterations +
+                     static_cast<double>(stats_.newton_raphson_iterations - iterations_before);
+      c.weight = kStartCostDecay * c.weight + 1.0;
+    }
     const double total = seconds_since(began);
     if (start != kKrylovStart && solved_by == kKrylovTrial) {
       charge(start, total - rescue_seconds, 0.0);
@@ -1015,8 +1022,18 @@ int ImplicitIntegrator::choose_start() {
   // as much (cloth_stiff.yaml: 0.25-0.85 of a Krylov start's recent cost).
   // Without the margin, cloth.yaml at a fixed 1/60 took 22 fresh starts in
   // one run of three, and 1.4x the time. The fresh start exists where the
-  // tension estimate does (fixed steps); error control keeps two starts.
-  const int starts = settings_.fixed_step && implicit_.tension_estimate ? kStarts : 2;
+  // tension estimate does (fixed steps; error control keeps two starts),
+  // and only while Krylov starts take kFreshStartIterations Newton
+  // iterations or more per solve: the estimate saves iterations, where
+  // each of full Newton's costs a factorization. Krylov starts averaged 15
+  // on cloth_stiff.yaml, 8 on the 100x100 sheet (where fresh starts chosen
+  // on a cheap first sample then took up to 30 and 1.2x the time) and 5 on
+  // cloth.yaml.
+  const StartCost& krylov = start_costs_[kKrylovStart];
+  const bool fresh_may_pay =
+      krylov.weight > 0.0 && krylov.iterations >= kFreshStartIterations * krylov.weight;
+  const int starts =
+      settings_.fixed_step && implicit_.tension_estimate && fresh_may_pay ? kStarts : 2;
   if (starts == kStarts &&
       cost(start_costs_[kFreshStart]) < kFreshStartMargin * cost(start_costs_[best])) {
     best = kFreshStart;

@@ -357,11 +357,13 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr int kFullNewtonTrial = 4;
   // The Krylov path's rung (see solve_step).
   static constexpr int kKrylovTrial = 5;
-  // NewtonSolve::kAuto: the two ways a solve can start, the decay of their
-  // measured costs per solve, and how often the costlier one is retried.
+  // NewtonSolve::kAuto: the ways a solve can start (the fresh start only at
+  // fixed steps), the decay of their measured costs per solve, and how
+  // often the costlier ones are retried.
   static constexpr int kChordStart = 0, kKrylovStart = 1, kFreshStart = 2;
   static constexpr int kStarts = 3;
-  static constexpr double kFreshStartMargin = 0.8;  // see choose_start()
+  static constexpr double kFreshStartMargin = 0.8;       // see choose_start()
+  static constexpr double kFreshStartIterations = 10.0;  // likewise
   static constexpr double kStartCostDecay = 0.9;
   static constexpr int kStartExploration = 16;
   int choose_start();
@@ -453,6 +455,7 @@ class ImplicitIntegrator : public IntegratorBase {
   // that converged) of the solves each start began.
   struct StartCost {
     double seconds = 0.0, simulated = 0.0;
+    double iterations = 0.0, weight = 0.0;  // Newton iterations per solve, decayed alike
     long solves = 0;
   };
   StartCost start_costs_[kStarts];
