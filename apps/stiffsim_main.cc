@@ -158,12 +158,15 @@ void add_run_options(CLI::App* run, RunOptions* o) {
   o->newton_solve_option =
       run->add_option("--newton-solve", o->newton_solve,
                       "How Newton iterations solve: auto (default: where the iteration "
-                      "matrix is sparse, each solve starts with the chord or krylov, whichever "
+                      "matrix is sparse, each solve starts with the chord, krylov or, at "
+                      "fixed steps where Krylov solves take many iterations, fresh, whichever "
                       "cost less lately; chord otherwise), krylov (GMRES on the exact Jacobian, "
                       "applied matrix-free, preconditioned by the last factorization, "
                       "refactored by measured cost), chord (the last "
                       "factorization as the Newton matrix, the reuse ladder), fresh (a new "
-                      "Jacobian and factorization every iteration) or recursive (exact "
+                      "Jacobian and factorization every iteration, a line search on the "
+                      "incremental potential and, at fixed steps, the springs' tensions "
+                      "estimated along the Newton path) or recursive (exact "
                       "articulated trees: the articulated-body recursion, O(n) per iteration; "
                       "auto's choice for VIE on trees of 250 or more joint velocities)")
           ->check(CLI::IsMember(newton_solve_names()))

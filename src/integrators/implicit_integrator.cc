@@ -648,8 +648,10 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       continue;
     }
     dx_ = x_trial_ - *x;
-    tension_positions_ = x->segment(0, dims_.nq);
-    tension_carried_ = true;
+    if (estimate_tensions_) {
+      tension_positions_ = x->segment(0, dims_.nq);
+      tension_carried_ = true;
+    }
     x->swap(x_trial_);
     r_.swap(r_trial_);
     const double norm = state_change_norm(dx_);

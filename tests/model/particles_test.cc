@@ -217,14 +217,22 @@ TEST(ParticleSystem, ForcesMatchHandComputedSpringGravityAndDrag) {
   EXPECT_NEAR(F[2], expected_z, 1e-12);
 }
 
-TEST(ParticleSystem, SpringForcesAreEqualAndOppositeAlongTheAxis) {
+// Two nodes joined by one spring: a at the origin, b at (3, 4, 0), so
+// l = 5 against L = 4 and k = 2; no gravity. With a pinned, the Jacobians
+// are b's 3x3 blocks.
+ParticleDescription spring_pair(bool pin_a) {
   ParticleDescription d;
   d.name = "pair";
   d.positions = {Vector3d(0, 0, 0), Vector3d(3, 4, 0)};
   d.masses = {1.0, 1.0};
   d.springs = {Spring{0, 1, 4.0, 2.0, 0.0}};
+  if (pin_a) d.pinned = {0};
   d.gravity.setZero();
-  const ParticleSystem sys(d);
+  return d;
+}
+
+TEST(ParticleSystem, SpringForcesAreEqualAndOppositeAlongTheAxis) {
+  const ParticleSystem sys(spring_pair(false));
   const VectorXd F = forces_at(sys, sys.initial_state().q(sys.dimensions()), VectorXd::Zero(6));
   // l = 5, L = 4: node a is pulled towards b with k (l - L) = 2 along (3, 4)/5.
   EXPECT_TRUE(F.head<3>().isApprox(Vector3d(1.2, 1.6, 0.0), 1e-14));
@@ -238,14 +246,7 @@ TEST(ParticleSystem, TensionEstimateReplacesOnlyTheTransverseStiffness) {
   // stiffness is k (l - L)/l = 0.4; the estimate gives k (l_p - L)/l = 0.4
   // as well, and carried k (u_p . d - L)/l = -0.4, which the definite
   // request clamps to 0. The axial term k u u^T never changes.
-  ParticleDescription d;
-  d.name = "pair";
-  d.positions = {Vector3d(0, 0, 0), Vector3d(3, 4, 0)};
-  d.masses = {1.0, 1.0};
-  d.springs = {Spring{0, 1, 4.0, 2.0, 0.0}};
-  d.pinned = {0};
-  d.gravity.setZero();
-  const ParticleSystem sys(d);
+  const ParticleSystem sys(spring_pair(true));
   const VectorXd q = sys.initial_state().q(sys.dimensions());
   const VectorXd v = VectorXd::Zero(3);
   const Vector3d p_b(5.0, 0.0, 0.0);
