@@ -494,6 +494,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // alternation); cloth.yaml and the 60x60 and 100x100 sheets, whose solves
   // rarely fail, took equal times.
   const int max_iterations = krylov ? kKrylovIterationFactor * implicit_.max_newton_iterations
+                             : rescue_budget_ ? implicit_.max_newton_iterations
                              : trial == kFullNewtonTrial || structured
                                  ? 3 * implicit_.max_newton_iterations
                                  : implicit_.max_newton_iterations;
@@ -918,11 +919,13 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     count = 2;
     ++stats_.fresh_first_solves;
   } else if (start == kKrylovStart) {
-    // No full-Newton rung after a failed Krylov solve: that path already
-    // iterates on the exact Jacobian with a preconditioner refactored at
-    // the iterate whenever a direction fails, so full Newton repeats it at
-    // a factorization per iteration; halving the step is cheaper (cloth.yaml
-    // at 1/60 for 2 s: see the README's table).
+    // No clamped full-Newton rung after a failed Krylov solve: that path
+    // already iterates on the exact Jacobian with a preconditioner
+    // refactored at the iterate whenever a direction fails, so full Newton
+    // on the same matrix repeats it at a factorization per iteration;
+    // halving the step is cheaper (cloth.yaml at 1/60 for 2 s: see the
+    // README's table). Full Newton on the tension estimate is another
+    // iteration, and ends the ladder at fixed steps (below).
     rungs[0] = kKrylovTrial;
     count = 1;
     ++stats_.krylov_first_solves;
@@ -943,48 +946,73 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
       count = 2;
     }
   }
-  const auto began = WallClock::now();
-  const long iterations_before = stats_.newton_raphson_iterations;
+  // At fixed steps, with the tension estimate, every ladder ends with full
+  // Newton on the estimate before h is halved. Where a Krylov solve fails
+  // (the k = 1e6 sheet folding, and the first step of a sheet at rest,
+  // whose flat membrane has no transverse stiffness) it usually converges,
+  // in 3-10 iterations on cloth_stiff.yaml. It gets the ordinary budget
+  // (max_newton_iterations), not the last rung's three times: on the
+  // 16x16 sheet of k = 1e9 the rescues that failed all ran out the 30
+  // iterations, and the run took 1.6x the time. cloth_stiff.yaml at 1/60
+  // for 2 s took 0-3 halvings before, none after, and about 0.7x the
+  // time (the README's table).
+  int rescue_rung = -1;
+  if (krylov_ && settings_.fixed_step && implicit_.tension_estimate &&
+      std::find(rungs, rungs + count, kFullNewtonTrial) == rungs + count) {
+    rescue_rung = count;
+    rungs[count++] = kFullNewtonTrial;
+  }
+  // Each rung's cost, gathered by the start it belongs to (the fresh rung
+  // is the fresh start's, the Krylov rung the Krylov start's).
+  double seconds_by_start[kStarts] = {0.0, 0.0, 0.0};
+  long krylov_rung_iterations = 0;
   bool solved = false;
   int solved_by = -1;
-  double rescue_seconds = 0.0;  // of a Krylov rung after a failed chord or fresh start
   for (int k = 0; k < count && !solved; ++k) {
     const auto rung_began = WallClock::now();
+    const long iterations_before = stats_.newton_raphson_iterations;
+    rescue_budget_ = k == rescue_rung;
     solved = newton(t0, h, x0, guess, rungs[k], x);
-    if (rungs[k] == kKrylovTrial && start != kKrylovStart)
-      rescue_seconds = seconds_since(rung_began);
-    if (solved) solved_by = rungs[k];
+    rescue_budget_ = false;
+    const int owner = rungs[k] == kKrylovTrial       ? kKrylovStart
+                      : rungs[k] == kFullNewtonTrial ? kFreshStart
+                                                     : kChordStart;
+    seconds_by_start[owner] += seconds_since(rung_began);
+    if (rungs[k] == kKrylovTrial) {
+      krylov_rung_iterations += stats_.newton_raphson_iterations - iterations_before;
+    }
+    if (solved) solved_by = owner;
+    if (solved && k == rescue_rung) ++stats_.fresh_rescues;
+    if (!solved && rungs[k] == kKrylovTrial) {
+      ++stats_.krylov_newton_failures;
+      eisenstat_walker_solves_left_ = kEisenstatWalkerSolves;
+    }
     if (!solved && !reuse_enabled()) break;
   }
+  // Where Krylov solves fail, nearly exact directions fail less (newton()):
+  // armed by a failed Krylov rung whether or not a later rung converged.
   if (!solved) eisenstat_walker_solves_left_ = kEisenstatWalkerSolves;
   if (auto_start) {
     // Costs decay by half in about seven solves of that start, so the
     // choice follows the scene as it changes (a sheet that starts to fold).
-    // A chord or fresh start that the Krylov rung rescued failed: its own
-    // rungs are charged to it with no simulated time, the rescue to Krylov.
-    // Credited with the step instead, a chord that failed every step but
-    // cost less than a Krylov start's factorizations kept being chosen
-    // (cloth.yaml at 1/60 for 2 s: 13-15 Newton iterations on most steps,
-    // 10 of them the chord's, 1,829 in all; now 40 chord iterations in
-    // 790-880).
-    auto charge = [this](int which, double seconds, double simulated) {
+    // A start that a later rung rescued failed: its own rungs are charged
+    // to it with no simulated time, the rescue's to the start that rung
+    // belongs to, with the step. Credited with the step instead, a chord
+    // that failed every step but cost less than a Krylov start's
+    // factorizations kept being chosen (cloth.yaml at 1/60 for 2 s: 13-15
+    // Newton iterations on most steps, 10 of them the chord's, 1,829 in
+    // all; now 40 chord iterations in 790-880).
+    for (int which = 0; which < kStarts; ++which) {
+      if (which != start && seconds_by_start[which] == 0.0) continue;
       StartCost& c = start_costs_[which];
-      c.seconds = kStartCostDecay * c.seconds + seconds;
-      c.simulated = kStartCostDecay * c.simulated + simulated;
+      c.seconds = kStartCostDecay * c.seconds + seconds_by_start[which];
+      c.simulated = kStartCostDecay * c.simulated + (solved_by == which ? h : 0.0);
       ++c.solves;
-    };
+    }
     if (start == kKrylovStart) {
       StartCost& c = start_costs_[kKrylovStart];
-      c.iterations = kStartCostDecay * c.iterations +
-                     static_cast<double>(stats_.newton_raphson_iterations - iterations_before);
+      c.iterations = kStartCostDecay * c.iterations + static_cast<double>(krylov_rung_iterations);
       c.weight = kStartCostDecay * c.weight + 1.0;
-    }
-    const double total = seconds_since(began);
-    if (start != kKrylovStart && solved_by == kKrylovTrial) {
-      charge(start, total - rescue_seconds, 0.0);
-      charge(kKrylovStart, rescue_seconds, h);
-    } else {
-      charge(start, total, solved ? h : 0.0);
     }
   }
   if (solved && caps_.has_quaternions) system_.project_positions(x->segment(0, dims_.nq));

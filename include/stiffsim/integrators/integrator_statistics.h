@@ -62,6 +62,11 @@ struct IntegratorStatistics {
   // each factorization happened.
   long krylov_first_solves = 0;  // Newton solves that started on the Krylov path
   long fresh_first_solves = 0;   // Newton solves that started with full Newton (auto)
+  // Fixed steps with the tension estimate: Newton solves on the Krylov rung
+  // that failed, and solves that full Newton with the estimate converged
+  // after every other rung had failed (instead of halving the step).
+  long krylov_newton_failures = 0;
+  long fresh_rescues = 0;
   // Fixed steps without an error estimate: step attempts (a halved step's
   // retries included) whose Newton tolerance the step's own local error
   // set (ImplicitSettings::step_error_tolerance).
