@@ -708,6 +708,22 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       residual_converged = true;
       ++stats_.krylov_chord_convergences;
     }
+    // Full Newton has the same test for free but one solve: the matrix
+    // just factored at the previous iterate gives the next update, where
+    // the rate test needs another iteration (a Jacobian, a factorization
+    // and a search) to measure it. Not for the extrapolated methods, nor
+    // where the iterate gained energy (as the residual test above).
+    // --newton-solve fresh on cloth_stiff.yaml at 1/60 for 2 s: 705
+    // Newton iterations instead of 823 (cloth.yaml: 664 instead of 749).
+    if (full_newton && !structured && !residual_converged && !implicit_.extrapolate &&
+        dx_.segment(offset, n).lpNorm<Eigen::Infinity>() <= kChordTestGate * solve_tolerance_ &&
+        energy_within_round_off(x0, *x)) {
+      ++stats_.fresh_chord_tests;
+      if (chord_agrees()) {
+        residual_converged = true;
+        ++stats_.fresh_chord_convergences;
+      }
+    }
     if (alpha < 1.0 && !residual_converged) {
       // A damped step says nothing about the rate of the undamped
       // iteration: the next full update is measured against the last full

@@ -83,6 +83,11 @@ struct IntegratorStatistics {
   // the tolerance. The solve then ends, unless a widened tolerance is
   // narrowed (newton_tolerance_narrowed) or the energy guard rejects it.
   long krylov_chord_convergences = 0;
+  // The same test in full Newton (the fresh factorization at the previous
+  // iterate gives the next update): its solves, and the iterates it
+  // accepted.
+  long fresh_chord_tests = 0;
+  long fresh_chord_convergences = 0;
   // Krylov-path iterates whose updates passed the rate test while the
   // chord's update was not within the tolerance (or no factorization could
   // give one): the solve went on.
