@@ -452,7 +452,7 @@ class ImplicitIntegrator : public IntegratorBase {
   bool tension_carried_ = false;
   bool estimate_tensions_ = false;
   // The running newton() is the ladder's rescue rung (solve_step), with
-  // the ordinary iteration budget.
+  // twice the ordinary iteration budget.
   bool rescue_budget_ = false;
   // Decayed sums of the wall time and of the simulated time (h of solves
   // that converged) of the solves each start began.
