@@ -773,7 +773,11 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       last_norm = std::numeric_limits<double>::infinity();
       continue;
     }
-    return passes_energy_guard(tf, h, x0, *x);
+    if (!passes_energy_guard(tf, h, x0, *x)) return false;
+    const double ratio = residual_size / solve_tolerance_;
+    double& largest = stats_.largest_final_residual_ratio;
+    if (std::isfinite(ratio) && !(ratio <= largest)) largest = ratio;  // NaN: none yet
+    return true;
   }
   return false;
 }

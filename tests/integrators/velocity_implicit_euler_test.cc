@@ -666,5 +666,45 @@ TEST(VelocityImplicitEuler, TensionEstimateConvergesToTheSameStepsInFewerIterati
   EXPECT_EQ(st.energy_guard_rejections, 0);
 }
 
+TEST(VelocityImplicitEuler, ReportsTheLargestFinalResidualAgainstTheTolerance) {
+  // A 12x12 cloth at a fixed 1/60 for 0.25 s, one step at a time. After
+  // each step the residual of the step equations is evaluated here from
+  // the system's forces, M (v - v_n) - h F(q_n + h v, v), in velocity
+  // units (divided by the masses); the largest over the steps, against
+  // the tolerance 0.05 x accuracy, is the statistic. The step's own Newton
+  // solves are its only solves here (no error estimate, no halving).
+  const auto sys = cloth(12, 1e4);
+  const double h = 1.0 / 60, accuracy = 1e-4;
+  for (const NewtonSolve solve : {NewtonSolve::kFresh, NewtonSolve::kKrylov}) {
+    ImplicitSettings implicit;
+    implicit.newton_solve = solve;
+    implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
+    VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
+    vie.initialize(sys->initial_state());
+    const Dimensions d = sys->dimensions();
+    SparseMatrix M = sys->mass_matrix_pattern();
+    sys->mass_matrix(sys->initial_state().q(d), &M);
+    const Eigen::VectorXd m = Eigen::VectorXd(M.diagonal());
+    Eigen::VectorXd F(d.nv);
+    double largest = 0.0;
+    for (int n = 1; n <= 15; ++n) {
+      const Eigen::VectorXd x0 = vie.state().x;
+      vie.integrate_to(n * h);
+      const Eigen::VectorXd& x = vie.state().x;
+      const Eigen::VectorXd v = x.segment(d.nq, d.nv);
+      sys->forces(n * h, x.head(d.nq), v, Eigen::VectorXd(), F);
+      const Eigen::VectorXd r =
+          (m.cwiseProduct(v - x0.segment(d.nq, d.nv)) - h * F).cwiseQuotient(m);
+      largest = std::max(largest, r.lpNorm<Eigen::Infinity>());
+    }
+    const IntegratorStatistics& st = vie.statistics();
+    ASSERT_EQ(st.substep_failures, 0);
+    ASSERT_EQ(st.energy_guard_rejections, 0);
+    EXPECT_EQ(st.newton_solves, 15);
+    const double ratio = largest / (0.05 * accuracy);
+    EXPECT_NEAR(st.largest_final_residual_ratio, ratio, 1e-6 * ratio) << vie.report().newton_solve;
+  }
+}
+
 }  // namespace
 }  // namespace stiffsim

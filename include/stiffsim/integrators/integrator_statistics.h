@@ -88,6 +88,12 @@ struct IntegratorStatistics {
   // accepted.
   long fresh_chord_tests = 0;
   long fresh_chord_convergences = 0;
+  // The largest ratio, over the Newton solves that converged, of the final
+  // iterate's residual (VIE: |r_i / m_i|, the velocity error bound where
+  // W >= M) to that solve's tolerance; NaN where the method has no such
+  // norm. Above 1 where the rate or chord test ended a solve: the
+  // residual overstates the error where W is many times M.
+  double largest_final_residual_ratio = kNaN;
   // Krylov-path iterates whose updates passed the rate test while the
   // chord's update was not within the tolerance (or no factorization could
   // give one): the solve went on.
