@@ -984,9 +984,9 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     rescue_rung = count;
     rungs[count++] = kFullNewtonTrial;
   }
-  // Each rung's cost, gathered by the start it belongs to (the fresh rung
-  // is the fresh start's, the Krylov rung the Krylov start's).
-  double seconds_by_start[kStarts] = {0.0, 0.0, 0.0};
+  // The time of the rung that converged, and of all the rungs.
+  double solver_seconds = 0.0;
+  const auto began = WallClock::now();
   long krylov_rung_iterations = 0;
   bool solved = false;
   int solved_by = -1;
@@ -999,7 +999,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     const int owner = rungs[k] == kKrylovTrial       ? kKrylovStart
                       : rungs[k] == kFullNewtonTrial ? kFreshStart
                                                      : kChordStart;
-    seconds_by_start[owner] += seconds_since(rung_began);
+    if (solved) solver_seconds = seconds_since(rung_began);
     if (rungs[k] == kKrylovTrial) {
       krylov_rung_iterations += stats_.newton_raphson_iterations - iterations_before;
     }
@@ -1017,19 +1017,30 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   if (auto_start) {
     // Costs decay by half in about seven solves of that start, so the
     // choice follows the scene as it changes (a sheet that starts to fold).
-    // A start that a later rung rescued failed: its own rungs are charged
-    // to it with no simulated time, the rescue's to the start that rung
-    // belongs to, with the step. Credited with the step instead, a chord
-    // that failed every step but cost less than a Krylov start's
-    // factorizations kept being chosen (cloth.yaml at 1/60 for 2 s: 13-15
-    // Newton iterations on most steps, 10 of them the chord's, 1,829 in
-    // all; now 40 chord iterations in 790-880).
-    for (int which = 0; which < kStarts; ++which) {
-      if (which != start && seconds_by_start[which] == 0.0) continue;
+    // A start that a later rung rescued failed: the rungs before the one
+    // that converged are charged to it with no simulated time, that rung to
+    // the start it belongs to (the Krylov rung to the Krylov start, the
+    // fresh rung to the fresh start), with the step. Credited with the
+    // step instead, a chord that failed every step but cost less than a
+    // Krylov start's factorizations kept being chosen (cloth.yaml at 1/60
+    // for 2 s: 13-15 Newton iterations on most steps, 10 of them the
+    // chord's, 1,829 in all; now 40 chord iterations in 790-880). A solve
+    // that failed is the start's alone: a rescue that failed with it (the
+    // first step of a sheet at rest, which no rung solves at h) charged to
+    // the fresh start kept it from being chosen on the 16x16 sheet of
+    // k = 1e8 until its solves on the Krylov start took 35 iterations.
+    const double total = seconds_since(began);
+    auto charge = [this](int which, double seconds, double simulated) {
       StartCost& c = start_costs_[which];
-      c.seconds = kStartCostDecay * c.seconds + seconds_by_start[which];
-      c.simulated = kStartCostDecay * c.simulated + (solved_by == which ? h : 0.0);
+      c.seconds = kStartCostDecay * c.seconds + seconds;
+      c.simulated = kStartCostDecay * c.simulated + simulated;
       ++c.solves;
+    };
+    if (solved && solved_by != start) {
+      charge(start, total - solver_seconds, 0.0);
+      charge(solved_by, solver_seconds, h);
+    } else {
+      charge(start, total, solved ? h : 0.0);
     }
     if (start == kKrylovStart) {
       StartCost& c = start_costs_[kKrylovStart];
