@@ -977,7 +977,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   // the ordinary budget cloth.yaml's rescues failed (3 runs of 5 took a
   // halving); with twice it none of 5 did. cloth_stiff.yaml at 1/60 for
   // 2 s took 0-3 halvings before, none after, and about 0.7x the time
-  // (the README's table).
+  // (the README).
   int rescue_rung = -1;
   if (krylov_ && settings_.fixed_step && implicit_.tension_estimate &&
       std::find(rungs, rungs + count, kFullNewtonTrial) == rungs + count) {
