@@ -397,6 +397,25 @@ class ImplicitIntegrator : public IntegratorBase {
   // The Krylov path's chord test (see newton()) runs after updates at most
   // this many times the Newton tolerance.
   static constexpr double kChordTestGate = 10.0;
+  // Full Newton's finishing iterations (see newton()): GMRES's forcing
+  // term, and the contraction an update must show to go on finishing.
+  static constexpr double kFinishingForcing = 0.1;
+  static constexpr double kFinishingContraction = 0.5;
+  // Whether a finishing solve is expected to cost less than the Jacobian
+  // and factorization it replaces, at the products finishing solves took
+  // lately (decayed as the starts' costs) and the measured time of a
+  // product.
+  bool finishing_pays() const;
+  // The finishing direction at the iterate x (rhs = minus the residual):
+  // GMRES on the exact Jacobian against the factorization made at an
+  // earlier iterate of this solve. False where GMRES missed its forcing.
+  bool finishing_direction(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
+                           const Eigen::VectorXd& rhs, Eigen::VectorXd* dy);
+  double finishing_products_ = 0.0, finishing_weight_ = 0.0;  // decayed, per finishing solve
+  // A Krylov solve whose search cut this many updates in a row below
+  // kStalledStep has stalled and is given up (see newton()).
+  static constexpr int kStalledUpdates = 5;
+  static constexpr double kStalledStep = 1.0 / 32;
 
   struct IterationMatrix {
     LinearSolverChoice solver;

@@ -88,6 +88,14 @@ struct IntegratorStatistics {
   // accepted.
   long fresh_chord_tests = 0;
   long fresh_chord_convergences = 0;
+  // Full Newton's finishing iterations after a chord test that failed: the
+  // GMRES solves on the exact Jacobian against that factorization, and the
+  // solves they ended (an update within the tolerance).
+  long fresh_finishing_solves = 0;
+  long fresh_finishing_convergences = 0;
+  // Krylov solves given up because the line search cut kStalledUpdates
+  // updates in a row to a small fraction (ImplicitIntegrator::newton()).
+  long krylov_stalled_solves = 0;
   // The largest ratio, over the Newton solves that converged, of the final
   // iterate's residual (VIE: |r_i / m_i|, the velocity error bound where
   // W >= M) to that solve's tolerance; NaN where the method has no such
