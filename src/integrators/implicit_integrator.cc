@@ -531,8 +531,9 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   double forcing = ceiling;
   double last_r_norm = 0.0;
   // Full Newton finishes with GMRES (below): whether the next iteration
-  // does, and the size of the last finishing update.
-  bool finishing = false;
+  // does, whether finishing failed in this solve (no more of it then), and
+  // the size of the last finishing update.
+  bool finishing = false, finishing_failed = false;
   double finishing_update = 0.0;
   int stalled_updates = 0;  // Krylov updates in a row cut below kStalledStep
   for (int i = 0; i < max_iterations; ++i) {
@@ -570,7 +571,10 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     } else if (finishing_now) {
       // A direction GMRES left short of its forcing is still judged by the
       // search; the next iteration refactors.
-      if (!finishing_direction(tf, h, x0, *x, r_, &dy_)) finishing = false;
+      if (!finishing_direction(tf, h, x0, *x, r_, &dy_)) {
+        finishing = false;
+        finishing_failed = true;
+      }
     } else {
       solve_iteration_matrix(r_, &dy_);
     }
@@ -645,6 +649,13 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
         break;
       }
       if (backtrack == kMaxBacktracks) {
+        // A finishing direction that does not descend: the iteration is
+        // repeated at this iterate with a new factorization.
+        if (finishing_now) {
+          finishing = false;
+          finishing_failed = retry = true;
+          break;
+        }
         // A Krylov direction that does not descend came from a solve
         // against an old preconditioner that missed its tolerance: the
         // iteration is repeated with a fresh factorization at this iterate.
@@ -756,8 +767,18 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       }
       // Where the exact direction was cut or did not contract, the
       // clamped matrix at a new iterate does better: back to refactoring.
+      // Where it was cut hard (or not accepted at all, above) it points
+      // away from the root: the exact Jacobian is indefinite where a sheet
+      // of soft springs folds, and on cloth.yaml's rescues such
+      // directions, taken at alpha = 1/16 to 1/256 after every refactored
+      // iteration, spent the budget: 3 runs of 12 took a halving (5 of 10
+      // when a search that failed also failed the solve), none of 12 once
+      // they end finishing for the solve. On cloth_stiff.yaml finishing
+      // often resumes after a direction that merely contracted too little,
+      // and pays.
       if (alpha < 1.0 || update_size > kFinishingContraction * finishing_update) {
         finishing = false;
+        if (alpha < kFinishingCut) finishing_failed = true;
       }
       finishing_update = update_size;
       // No rate across finishing updates and the refactored ones after.
@@ -770,7 +791,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (chord_agrees()) {
         residual_converged = true;
         ++stats_.fresh_chord_convergences;
-      } else if (krylov_ && finishing_pays()) {
+      } else if (krylov_ && !finishing_failed && finishing_pays()) {
         // The chord's update, within kChordTestGate of the tolerance, says
         // the iterate is near the root, but not near enough: there full
         // Newton's matrix (compressed springs clamped, the damping's

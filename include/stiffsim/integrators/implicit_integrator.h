@@ -401,6 +401,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // term, and the contraction an update must show to go on finishing.
   static constexpr double kFinishingForcing = 0.1;
   static constexpr double kFinishingContraction = 0.5;
+  // A finishing update the search cut below this ends finishing for the
+  // solve.
+  static constexpr double kFinishingCut = 0.25;
   // Whether a finishing solve is expected to cost less than the Jacobian
   // and factorization it replaces, at the products finishing solves took
   // lately (decayed as the starts' costs) and the measured time of a
