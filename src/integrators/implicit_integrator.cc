@@ -1281,10 +1281,11 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
 }
 
 bool ImplicitIntegrator::finishing_pays() const {
+  if (implicit_.finishing_share <= 0.0) return false;
   // Tried until a finishing solve and a product have been measured.
   if (product_seconds_ <= 0.0 || finishing_weight_ <= 0.0) return true;
   return finishing_products_ / finishing_weight_ * product_seconds_ <
-         last_jacobian_seconds_ + last_factorization_seconds_;
+         implicit_.finishing_share * (last_jacobian_seconds_ + last_factorization_seconds_);
 }
 
 bool ImplicitIntegrator::finishing_direction(double tf, double h, const Eigen::VectorXd& x0,

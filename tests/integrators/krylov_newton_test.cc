@@ -375,7 +375,8 @@ TEST(KrylovNewton, StalledKrylovSolvesGiveWayToTheRescue) {
 // the chord test (the factorization just made, solving the new residual)
 // fails after an update near the tolerance, GMRES on the exact Jacobian
 // against that factorization gives the next directions, and an update within
-// the tolerance ends the solve. Under auto at fixed steps full Newton is the
+// the tolerance ends the solve (here wherever the chord test fails: the
+// finishing share is set above any cost ratio). Under auto at fixed steps full Newton is the
 // fresh start, chosen on a sheet of k = 1e6 springs folding at 1/60 where
 // the run's timings let auto choose among starts (see
 // AutoExploresTheFreshStartWhereItMayPay). Each step that finishing ended is
@@ -390,6 +391,7 @@ TEST(KrylovNewton, FullNewtonFinishesOnTheExactJacobianAtTheSameSteps) {
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kAuto;
   implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
+  implicit.finishing_share = 1e9;         // finishing whatever the timings
   VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
   vie.initialize(sys->initial_state());
   const int nq = sys->dimensions().nq;
@@ -425,6 +427,12 @@ TEST(KrylovNewton, FullNewtonFinishesOnTheExactJacobianAtTheSameSteps) {
     EXPECT_GT(st.fresh_finishing_convergences, 0);
     EXPECT_GE(compared, 1);
   }
+  // A share of 0 turns finishing off.
+  implicit.finishing_share = 0.0;
+  VelocityImplicitEuler off(*sys, fixed(h, false, accuracy), implicit);
+  off.initialize(sys->initial_state());
+  off.integrate_to(60 * h);
+  EXPECT_EQ(off.statistics().fresh_finishing_solves, 0);
 }
 
 // Under auto at fixed steps, a third start (full Newton with the springs'
