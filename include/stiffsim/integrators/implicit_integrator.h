@@ -411,11 +411,11 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr double kFinishingCut = 0.25;
   // Whether a finishing solve is expected to cost less than
   // ImplicitSettings::finishing_share of the Jacobian and factorization it
-  // replaces, at the
-  // products finishing solves took lately (decayed as the starts' costs)
-  // and the measured time of a product. Only about one finishing solve in
-  // three ends the Newton solve, and a finishing iteration that fails
-  // costs an iteration; so the share. Measured against no finishing
+  // replaces, at the products finishing solves took lately (decayed as the
+  // starts' costs) and the measured time of a product. Only about one
+  // finishing solve in three ends the Newton solve, and a finishing
+  // iteration that fails costs an iteration; so the share. Measured
+  // against no finishing
   // (alternated runs): a 48x48 sheet of k = 1e6 springs at 1/60 for
   // 0.5 s 0.74x the time at 0.3 and 0.92x at 1; cloth_stiff.yaml (32x32)
   // 1.00x and 0.98x. The 16x16 sheet of k = 1e8, where a product costs a
