@@ -427,7 +427,8 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
 }
 
 bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
-                                const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x) {
+                                const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x,
+                                bool rescue) {
   const double tf = t0 + h;
   const int offset = unknowns_offset();
   const int n = static_cast<int>(r_.size());
@@ -494,8 +495,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // 3,700-4,200 with three, and 0.57x the time (two runs each, in
   // alternation); cloth.yaml and the 60x60 and 100x100 sheets, whose solves
   // rarely fail, took equal times.
-  const int max_iterations = krylov ? kKrylovIterationFactor * implicit_.max_newton_iterations
-                             : rescue_budget_ ? 2 * implicit_.max_newton_iterations
+  const int max_iterations = krylov   ? kKrylovIterationFactor * implicit_.max_newton_iterations
+                             : rescue ? 2 * implicit_.max_newton_iterations
                              : trial == kFullNewtonTrial || structured
                                  ? 3 * implicit_.max_newton_iterations
                                  : implicit_.max_newton_iterations;
@@ -1074,9 +1075,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   for (int k = 0; k < count && !solved; ++k) {
     const auto rung_began = WallClock::now();
     const long iterations_before = stats_.newton_raphson_iterations;
-    rescue_budget_ = k == rescue_rung;
-    solved = newton(t0, h, x0, guess, rungs[k], x);
-    rescue_budget_ = false;
+    solved = newton(t0, h, x0, guess, rungs[k], x, k == rescue_rung);
     const int owner = rungs[k] == kKrylovTrial       ? kKrylovStart
                       : rungs[k] == kFullNewtonTrial ? kFreshStart
                                                      : kChordStart;

@@ -309,8 +309,10 @@ class ImplicitIntegrator : public IntegratorBase {
   enum class Refresh { kProceed, kSkip, kGiveUp };
   Refresh refresh_matrices(double t, const Eigen::VectorXd& x, double h, int trial);
   void compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h);
+  // `rescue`: the ladder's rescue rung (solve_step), with twice the
+  // ordinary iteration budget.
   bool newton(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
-              int trial, Eigen::VectorXd* x);
+              int trial, Eigen::VectorXd* x, bool rescue = false);
   // The Krylov path's Newton direction at the iterate x: GMRES
   // (newton_gmres()) preconditioned by the last factorization, which is
   // refactored at x when the cost model or a failed solve says so. False
@@ -486,9 +488,6 @@ class ImplicitIntegrator : public IntegratorBase {
   Eigen::VectorXd tension_positions_;
   bool tension_carried_ = false;
   bool estimate_tensions_ = false;
-  // The running newton() is the ladder's rescue rung (solve_step), with
-  // twice the ordinary iteration budget.
-  bool rescue_budget_ = false;
   // Decayed sums of the wall time and of the simulated time (h of solves
   // that converged) of the solves each start began.
   struct StartCost {
