@@ -81,6 +81,9 @@ struct JacobianRequest {
   // tension. Only for iteration matrices: the residual stays exact.
   const double* tension_positions = nullptr;
   bool tension_carried = false;
+  // definite and tension_positions change dF/dq only: dF/dv is the same
+  // whatever they say (an integrator takes the damping matrix from an
+  // iteration matrix's Jacobians).
 };
 
 // The workspace of a System's evaluations: a System is an immutable model,

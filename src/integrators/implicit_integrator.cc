@@ -607,7 +607,11 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     double g_current = 0.0, slope = 0.0;
     if (use_potential) {
       // G itself is only needed by a search.
-      if (!take_as_is) g_current = potential(tf, x0, *x, h, true);
+      if (!take_as_is) {
+        g_current = potential(tf, x0, *x, h, true,
+                              full_newton && !finishing_now && !structured &&
+                                  implicit_.jacobian == JacobianScheme::kAnalytic);
+      }
       slope = -r_.dot(dy_);  // r_ holds minus the residual = minus grad G
     }
     const bool descend_potential = use_potential && slope < 0.0;

@@ -108,6 +108,7 @@ void VelocityImplicitEuler::do_initialize() {
                          caps_.diagonal_mass_matrix && caps_.constant_mass_matrix && d.nz == 0;
   if (use_potential_merit_) {
     merit_jacobians_ = system_.jacobian_pattern();
+    damping_matrix_ = &merit_jacobians_.dF_dv;
     Dv_.resize(d.nv);
     g_scale_ = 0.0;
   }
@@ -298,7 +299,7 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
   double inertia = 0.0;
   for (int i = 0; i < d.nv; ++i) inertia += 0.5 * m[i] * dv_[i] * dv_[i];
   if (!damping) return inertia + potential;
-  Dv_.noalias() = merit_jacobians_.dF_dv * v;
+  Dv_.noalias() = *damping_matrix_ * v;
   return inertia + potential - 0.5 * h * v.dot(Dv_);
 }
 
@@ -322,8 +323,21 @@ bool VelocityImplicitEuler::potential_search(int trial) const {
 }
 
 double VelocityImplicitEuler::potential(double t, const Eigen::VectorXd& x0,
-                                        const Eigen::VectorXd& x, double h, bool new_iterate) {
-  if (new_iterate) evaluate_damping(t, x);
+                                        const Eigen::VectorXd& x, double h, bool new_iterate,
+                                        bool jacobian_at_x) {
+  // Full Newton's Jacobian at the iterate holds its damping matrix: an
+  // evaluation of the damping alone costs as much as the Jacobian (every
+  // spring's frame), and full Newton searches every iterate
+  // (cloth_stiff.yaml: about one in two of the run's force-Jacobian
+  // evaluations).
+  if (new_iterate) {
+    if (jacobian_at_x) {
+      damping_matrix_ = &jacobians_.dF_dv;
+    } else {
+      evaluate_damping(t, x);
+      damping_matrix_ = &merit_jacobians_.dF_dv;
+    }
+  }
   return incremental_potential(t, x0, x, h);
 }
 

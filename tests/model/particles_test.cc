@@ -274,6 +274,41 @@ TEST(ParticleSystem, TensionEstimateReplacesOnlyTheTransverseStiffness) {
   EXPECT_TRUE(forces_at(sys, q, v).isApprox(-Vector3d(1.2, 1.6, 0.0), 1e-14));
 }
 
+// The iteration matrices' requests (the definite clamp, the tension
+// estimate) change dF/dq only (JacobianRequest): an integrator takes the
+// damping matrix of its line-search potential from an iteration matrix's
+// Jacobians. A damped cloth (drag too) in motion, every spring compressed
+// by 3% so the clamp acts, the tension estimated at positions stretched
+// by 2%: dF/dv is the default request's to the last bit, dF/dq is not.
+TEST(ParticleSystem, DampingMatrixIsTheSameWhateverTheRequest) {
+  const ParticleSystem sys(make_cloth(small_cloth(0.8)));
+  const Dimensions d = sys.dimensions();
+  const VectorXd q = 0.97 * sys.initial_state().q(d);
+  const VectorXd p = 1.02 * sys.initial_state().q(d);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  VectorXd v(d.nv);
+  for (int i = 0; i < d.nv; ++i) v[i] = uniform(rng);
+  auto jacobians = [&](const JacobianRequest& request) {
+    ForceJacobians J = sys.jacobian_pattern();
+    sys.force_jacobians(0.0, q, v, VectorXd(), request, &J);
+    return J;
+  };
+  const ForceJacobians plain = jacobians(JacobianRequest{});
+  ASSERT_GT(MatrixXd(plain.dF_dv).norm(), 0.0);
+  JacobianRequest definite, estimate, carried, both;
+  definite.definite = both.definite = true;
+  estimate.tension_positions = carried.tension_positions = both.tension_positions = p.data();
+  carried.tension_carried = both.tension_carried = true;
+  for (const JacobianRequest* request : {&definite, &estimate, &carried, &both}) {
+    const ForceJacobians J = jacobians(*request);
+    ASSERT_EQ(J.dF_dv.nonZeros(), plain.dF_dv.nonZeros());
+    EXPECT_TRUE(std::equal(J.dF_dv.valuePtr(), J.dF_dv.valuePtr() + J.dF_dv.nonZeros(),
+                           plain.dF_dv.valuePtr()));
+    EXPECT_GT(MatrixXd(J.dF_dq - plain.dF_dq).norm(), 1e-3 * MatrixXd(plain.dF_dq).norm());
+  }
+}
+
 TEST(ParticleSystem, CollapsedSpringGivesFiniteForcesAndJacobians) {
   ParticleDescription d;
   d.name = "zero";

@@ -230,9 +230,14 @@ class ImplicitIntegrator : public IntegratorBase {
   // Whether potential() is available at all (the Krylov path searches on it
   // from the first iteration).
   virtual bool has_potential() const { return false; }
+  // G at the iterate x (new_iterate: a new Newton iterate, where G's
+  // frozen terms are taken; false: a line-search trial point, with those
+  // of the last iterate). jacobian_at_x: jacobians_ were just evaluated at
+  // x itself by the analytic scheme (full Newton's iterate), so their dF/dv
+  // is x's damping matrix (JacobianRequest).
   virtual double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double h,
-                           bool new_iterate) {
-    (void)t, (void)x0, (void)x, (void)h, (void)new_iterate;
+                           bool new_iterate, bool jacobian_at_x = false) {
+    (void)t, (void)x0, (void)x, (void)h, (void)new_iterate, (void)jacobian_at_x;
     return 0.0;
   }
   // Round-off level of G near g (differences below it are noise).

@@ -55,7 +55,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   void begin_newton(double t0, double h, const Eigen::VectorXd& x0) override;
   bool potential_search(int trial) const override;
   double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double h,
-                   bool new_iterate) override;
+                   bool new_iterate, bool jacobian_at_x = false) override;
   double potential_roundoff(double g) const override;
 
  private:
@@ -80,6 +80,9 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   double step_error_ = 0.0, step_error_h_ = 0.0;
   double g_scale_ = 0.0;       // energy magnitude, for the round-off of G
   ForceJacobians merit_jacobians_;
+  // D_k of G_k: merit_jacobians_.dF_dv, or jacobians_.dF_dv where those
+  // were evaluated at the iterate (potential()).
+  const SparseMatrix* damping_matrix_ = nullptr;
   State energy_state_;
   Eigen::VectorXd dv_, Dv_;
 
