@@ -54,7 +54,9 @@ class CholmodSolver final : public LinearSolver {
   // kLLT is simplicial or supernodal as the last LL^T analysis chose.
   enum class Mode { kLLT, kLDLT, kUmfpack };
 
-  cholmod_sparse wrap(const SparseMatrix& A) const;
+  // A view of A (both triangles held) for CHOLMOD, which reads the lower
+  // triangle (stype -1) or the upper one (+1).
+  cholmod_sparse wrap(const SparseMatrix& A, int stype = -1) const;
   void analyze_with_cholmod(const SparseMatrix& pattern);
   // One numeric factorization in the current mode, taking the fallbacks.
   bool factorize_with_fallback(const SparseMatrix& A);
