@@ -1,7 +1,12 @@
 #include "stiffsim/linalg/blas_threads.h"
 
+#include <cholmod.h>
+#include <dlfcn.h>
+#include <link.h>
+
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <mutex>
 
 // Weak: resolved only when the BLAS behind libblas.so.3 is OpenBLAS, so the
@@ -23,6 +28,38 @@ std::atomic<int> process_threads{0};  // 0: neither set nor defaulted yet
 std::atomic<bool> set_explicitly{false};
 // The count this thread's OpenMP settings were last given; 0 for none.
 thread_local int thread_openmp_threads = 0;
+std::atomic<long> regions_run_inline{0};
+
+// The addresses of CHOLMOD's code: the executable segments of the loaded
+// object that holds cholmod_start. Empty when none is found.
+struct CodeRange {
+  std::uintptr_t begin = 0, end = 0;
+  bool contains(std::uintptr_t address) const { return address >= begin && address < end; }
+};
+
+CodeRange cholmod_code() {
+  struct Search {
+    std::uintptr_t target;
+    CodeRange found;
+  } search{reinterpret_cast<std::uintptr_t>(&cholmod_start), {}};
+  dl_iterate_phdr(
+      [](dl_phdr_info* info, std::size_t, void* data) {
+        auto* s = static_cast<Search*>(data);
+        CodeRange code{UINTPTR_MAX, 0};
+        for (int k = 0; k < info->dlpi_phnum; ++k) {
+          const ElfW(Phdr)& segment = info->dlpi_phdr[k];
+          if (segment.p_type != PT_LOAD || !(segment.p_flags & PF_X)) continue;
+          const std::uintptr_t begin = info->dlpi_addr + segment.p_vaddr;
+          code.begin = std::min(code.begin, begin);
+          code.end = std::max<std::uintptr_t>(code.end, begin + segment.p_memsz);
+        }
+        if (!code.contains(s->target)) return 0;
+        s->found = code;
+        return 1;
+      },
+      &search);
+  return search.found;
+}
 
 bool apply_openblas(int threads) {
   if (openblas_set_num_threads == nullptr) return false;
@@ -71,6 +108,34 @@ void apply_blas_threads() {
 
 int current_blas_threads() { return process_threads.load(); }
 
+long openmp_regions_run_inline() { return regions_run_inline.load(std::memory_order_relaxed); }
+
 bool blas_threads_set_explicitly() { return set_explicitly.load(); }
 
 }  // namespace stiffsim
+
+// GCC compiles `#pragma omp parallel` into a call of GOMP_parallel, and
+// libgomp's runs even a one-thread region as a team: it allocates and
+// clears the team and wakes its barrier by a system call at the end, some
+// microseconds each. CHOLMOD's supernodal factorization opens a region for
+// nearly every supernode (to clear it and to assemble A into it), so with
+// one thread that overhead was a quarter of the factorization of a 32x32
+// cloth's matrix (BM_Factorize/32: 4.2-4.5 ms, 3.3-3.4 ms inline) and a
+// tenth of cloth_stiff.yaml's run time in the kernel. This definition,
+// found before libgomp's, runs CHOLMOD's regions as a direct call where
+// the calling thread was given one thread (apply_openmp): a region run on
+// one thread outside any team is OpenMP's orphaned case, whose loops and
+// barriers behave as the team of one does. Every other caller, and CHOLMOD
+// with more threads, goes to libgomp.
+extern "C" void GOMP_parallel(void (*fn)(void*), void* data, unsigned num_threads, unsigned flags) {
+  using Parallel = void (*)(void (*)(void*), void*, unsigned, unsigned);
+  static const stiffsim::CodeRange cholmod = stiffsim::cholmod_code();
+  static const auto next = reinterpret_cast<Parallel>(dlsym(RTLD_NEXT, "GOMP_parallel"));
+  const auto caller = reinterpret_cast<std::uintptr_t>(__builtin_return_address(0));
+  if (next == nullptr || (stiffsim::thread_openmp_threads == 1 && cholmod.contains(caller))) {
+    stiffsim::regions_run_inline.fetch_add(1, std::memory_order_relaxed);
+    fn(data);
+    return;
+  }
+  next(fn, data, num_threads, flags);
+}

@@ -2,9 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/SparseCore>
 #include <cstdio>
 #include <cstdlib>
 #include <thread>
+#include <vector>
 
 #include "stiffsim/linalg/cholmod_solver.h"
 #include "stiffsim/linalg/umfpack_solver.h"
@@ -39,6 +41,49 @@ int team_size_of_region_asking_for_four() {
       },
       &team, 4, 0);
   return team;
+}
+
+// The matrix of a 32x32 cloth's springs (stretch, shear, bend) with three
+// dofs per node, plus the unit mass: SPD, and supernodal in CHOLMOD.
+Eigen::SparseMatrix<double> cloth_like_matrix() {
+  constexpr int m = 32;
+  std::vector<Eigen::Triplet<double>> entries;
+  auto couple = [&](int a, int b, double k) {
+    for (int d = 0; d < 3; ++d) {
+      entries.emplace_back(3 * a + d, 3 * a + d, k);
+      entries.emplace_back(3 * b + d, 3 * b + d, k);
+      entries.emplace_back(3 * a + d, 3 * b + d, -k);
+      entries.emplace_back(3 * b + d, 3 * a + d, -k);
+    }
+  };
+  for (int y = 0; y < m; ++y) {
+    for (int x = 0; x < m; ++x) {
+      const int n = y * m + x;
+      for (int d = 0; d < 3; ++d) entries.emplace_back(3 * n + d, 3 * n + d, 1.0);
+      if (x + 1 < m) couple(n, n + 1, 700.0);
+      if (y + 1 < m) couple(n, n + m, 700.0);
+      if (x + 1 < m && y + 1 < m) couple(n, n + m + 1, 70.0);
+      if (x > 0 && y + 1 < m) couple(n, n + m - 1, 70.0);
+      if (x + 2 < m) couple(n, n + 2, 7.0);
+      if (y + 2 < m) couple(n, n + 2 * m, 7.0);
+    }
+  }
+  Eigen::SparseMatrix<double> A(3 * m * m, 3 * m * m);
+  A.setFromTriplets(entries.begin(), entries.end());
+  return A;
+}
+
+// Factors A with `threads` and returns A^-1 b for b = (1, 2, 3, ...).
+Eigen::VectorXd solve_with(const Eigen::SparseMatrix<double>& A, int threads) {
+  set_blas_threads(threads);
+  CholmodSolver solver;
+  solver.analyze(A);
+  EXPECT_EQ(solver.method(), "cholmod-supernodal-llt");
+  EXPECT_TRUE(solver.factorize(A));
+  const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(A.rows(), 1.0, A.rows());
+  Eigen::VectorXd x(A.rows());
+  solver.solve(b, &x);
+  return x;
 }
 
 // Run in a fresh process (the threadsafe death-test style re-executes the
@@ -95,6 +140,27 @@ TEST(BlasThreadsTest, AnExplicitCountWinsOverTheDefault) {
   EXPECT_EQ(omp_get_max_threads(), 2);
   EXPECT_GE(omp_get_max_active_levels(), 1);
   set_blas_threads(1);
+}
+
+// CHOLMOD's supernodal factorization opens an OpenMP region for nearly
+// every supernode; with one thread they run as direct calls
+// (GOMP_parallel in blas_threads.cc), with two through libgomp, and the
+// factor is the same. A region this test opens itself goes to libgomp
+// either way (its team: OneThreadAllowsNoActiveLevelAndMoreRestoresOne).
+TEST(BlasThreadsTest, CholmodsRegionsRunInlineOnOneThread) {
+  if (!have_libgomp()) GTEST_SKIP() << "no libgomp loaded";
+  const Eigen::SparseMatrix<double> A = cloth_like_matrix();
+  const long before = openmp_regions_run_inline();
+  const Eigen::VectorXd inline_x = solve_with(A, 1);
+  const long after_one = openmp_regions_run_inline();
+  // Measured: 2,674 regions in the analysis and one factorization.
+  EXPECT_GT(after_one - before, 100);
+  const Eigen::VectorXd team_x = solve_with(A, 2);
+  EXPECT_EQ(openmp_regions_run_inline(), after_one);
+  set_blas_threads(1);
+  team_size_of_region_asking_for_four();
+  EXPECT_EQ(openmp_regions_run_inline(), after_one);
+  EXPECT_LT((inline_x - team_x).norm(), 1e-12 * team_x.norm());
 }
 
 // OpenMP's settings belong to each thread: a thread started after

@@ -15,6 +15,13 @@
 // OMP_THREAD_LIMIT; only the OpenMP regions that ask for no count follow the
 // number given here.
 //
+// A region that runs on one thread still costs libgomp a team: allocated,
+// cleared and ended by a system call. CHOLMOD's supernodal factorization
+// opens one for nearly every supernode (2,674 for a 32x32 cloth's matrix),
+// so where the calling thread has one thread its regions run as direct
+// calls instead (GOMP_parallel, defined in blas_threads.cc and found before
+// libgomp's; openmp_regions_run_inline() counts them).
+//
 // OpenBLAS's count is process-wide, but OpenMP's settings belong to each
 // thread: the sparse solvers call apply_blas_threads() in the thread that
 // constructs, analyzes or factorizes, which carries the process-wide count
@@ -39,5 +46,11 @@ void apply_blas_threads();
 int current_blas_threads();
 // True once set_blas_threads was called (not only the default applied).
 bool blas_threads_set_explicitly();
+
+// CHOLMOD's OpenMP regions that ran as direct calls in threads given one
+// thread, since the process started. libgomp runs a one-thread region as a
+// team (allocated, cleared and ended by a system call); blas_threads.cc
+// defines GOMP_parallel, found before libgomp's, to skip that for CHOLMOD.
+long openmp_regions_run_inline();
 
 }  // namespace stiffsim
