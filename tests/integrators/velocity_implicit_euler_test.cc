@@ -606,6 +606,17 @@ TEST(VelocityImplicitEuler, FailureAtMinimumStepNamesTimeAndStep) {
   }
 }
 
+// An n x n sheet with cloth_stiff.yaml's springs (stretch k = 1e6).
+ClothSpec stiff_sheet(int n) {
+  ClothSpec spec;
+  spec.nx = spec.ny = n;
+  spec.total_mass = 0.4;
+  spec.stretch = SpringParameters{1e6, 0.5};
+  spec.shear = SpringParameters{1e2, 0.1};
+  spec.bend = SpringParameters{10.0, 0.05};
+  return spec;
+}
+
 TEST(VelocityImplicitEuler, TensionEstimateConvergesToTheSameStepsInFewerIterations) {
   // A 10x10 sheet with cloth_stiff.yaml's springs (stretch k = 1e6) falling
   // at a fixed 1/60 for 0.25 s, full Newton at every iterate with the
@@ -616,13 +627,7 @@ TEST(VelocityImplicitEuler, TensionEstimateConvergesToTheSameStepsInFewerIterati
   // Newton tolerances (the residual bounds the velocity error in mass
   // units, and W >= M). The estimate needs fewer iterations than the exact
   // tension, which counts the sheet's transverse motion as stretch.
-  ClothSpec spec;
-  spec.nx = spec.ny = 10;
-  spec.total_mass = 0.4;
-  spec.stretch = SpringParameters{1e6, 0.5};
-  spec.shear = SpringParameters{1e2, 0.1};
-  spec.bend = SpringParameters{10.0, 0.05};
-  ParticleSystem cloth(make_cloth(spec));
+  ParticleSystem cloth(make_cloth(stiff_sheet(10)));
   const double h = 1.0 / 60, accuracy = 1e-6;
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kFresh;
@@ -674,13 +679,7 @@ TEST(VelocityImplicitEuler, TensionEstimateConvergesToTheSameStepsInFewerIterati
 // differences, which approximate it, it is evaluated anew. A 10x10 sheet
 // of cloth_stiff.yaml's springs at a fixed 1/60 for 0.25 s.
 TEST(VelocityImplicitEuler, FullNewtonSearchesTakeTheDampingFromTheIteratesJacobian) {
-  ClothSpec spec;
-  spec.nx = spec.ny = 10;
-  spec.total_mass = 0.4;
-  spec.stretch = SpringParameters{1e6, 0.5};
-  spec.shear = SpringParameters{1e2, 0.1};
-  spec.bend = SpringParameters{10.0, 0.05};
-  ParticleSystem cloth(make_cloth(spec));
+  ParticleSystem cloth(make_cloth(stiff_sheet(10)));
   const double h = 1.0 / 60;
   IntegratorStatistics st[2];
   const JacobianScheme schemes[2] = {JacobianScheme::kAnalytic, JacobianScheme::kForward};
