@@ -107,6 +107,7 @@ void CholmodSolver::analyze(const SparseMatrix& pattern) {
 
 void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
   free_factor_and_workspace();
+  prepermuted_.active = false;
   // LL^T: CHOLMOD_AUTO lets cholmod_analyze pick simplicial when the ordered
   // pattern's flops per factor entry are below supernodal_switch (40): a banded
   // rope gives supernodes too thin for dense kernels to pay for their explicit
@@ -129,6 +130,81 @@ void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
                         format_ratio(common_.supernodal_switch) +
                         ", nnz(L) = " + std::to_string(static_cast<long>(common_.lnz)) + " (" +
                         format_ratio(fill) + "x tril(A))";
+  if (llt_supernodal_ && prepermute(pattern)) {
+    factorization_note_ += "; P A P^T formed at the analysis, factored as given";
+  }
+}
+
+bool CholmodSolver::prepermute(const SparseMatrix& pattern) {
+  // cholmod_factorize permutes A into tril(P A P^T) at every factorization
+  // by a permuted transpose, into a copy it allocates and frees (4.5% of
+  // cloth_stiff.yaml's samples under perf, after the upper triangle had
+  // saved the second transpose). That matrix's pattern is fixed: it is
+  // built here once, with the slot of A each entry comes from, and
+  // analyzed again in the natural ordering (P already holds the
+  // postordering), which CHOLMOD factors as it is given.
+  const int n = n_;
+  const int* P = static_cast<const int*>(factor_->Perm);
+  Prepermuted pre;
+  pre.perm.assign(P, P + n);
+  std::vector<int> position(n);
+  for (int k = 0; k < n; ++k) position[P[k]] = k;
+  std::vector<std::vector<std::pair<int, int>>> columns(n);  // (row, slot of A)
+  for (int j = 0; j < n; ++j) {
+    for (int s = pattern.outerIndexPtr()[j]; s < pattern.outerIndexPtr()[j + 1]; ++s) {
+      const int row = position[pattern.innerIndexPtr()[s]], column = position[j];
+      if (row >= column) columns[column].emplace_back(row, s);
+    }
+  }
+  pre.outer.assign(1, 0);
+  for (auto& column : columns) {
+    std::sort(column.begin(), column.end());
+    for (const auto& [row, slot] : column) {
+      pre.inner.push_back(row);
+      pre.source.push_back(slot);
+    }
+    pre.outer.push_back(static_cast<int>(pre.inner.size()));
+  }
+  pre.values.assign(pre.inner.size(), 0.0);
+  pre.rhs.resize(n);
+  prepermuted_ = std::move(pre);
+  cholmod_sparse lower = prepermuted_view();
+  const cholmod_common saved = common_;
+  common_.nmethods = 1;
+  common_.method[0].ordering = CHOLMOD_NATURAL;
+  common_.postorder = false;
+  common_.supernodal = CHOLMOD_SUPERNODAL;
+  cholmod_factor* natural = cholmod_analyze(&lower, &common_);
+  // Only the settings: the statistics (fl, lnz) stay the first analysis's.
+  common_.nmethods = saved.nmethods;
+  common_.method[0].ordering = saved.method[0].ordering;
+  common_.postorder = saved.postorder;
+  common_.supernodal = saved.supernodal;
+  if (natural == nullptr || natural->ordering != CHOLMOD_NATURAL || !natural->is_super ||
+      natural->xsize != factor_->xsize || natural->nsuper != factor_->nsuper) {
+    cholmod_free_factor(&natural, &common_);
+    return false;
+  }
+  cholmod_free_factor(&factor_, &common_);
+  factor_ = natural;
+  prepermuted_.active = true;
+  return true;
+}
+
+cholmod_sparse CholmodSolver::prepermuted_view() {
+  cholmod_sparse lower{};
+  lower.nrow = lower.ncol = static_cast<size_t>(n_);
+  lower.nzmax = prepermuted_.inner.size();
+  lower.p = prepermuted_.outer.data();
+  lower.i = prepermuted_.inner.data();
+  lower.x = prepermuted_.values.data();
+  lower.stype = -1;  // the natural ordering's fastest form (no transpose)
+  lower.itype = CHOLMOD_INT;
+  lower.xtype = CHOLMOD_REAL;
+  lower.dtype = CHOLMOD_DOUBLE;
+  lower.sorted = 1;
+  lower.packed = 1;
+  return lower;
 }
 
 bool CholmodSolver::factorize(const SparseMatrix& A) {
@@ -164,6 +240,13 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   // frees its copy: on cloth_stiff.yaml the transposes took 6.7% of the
   // run's time with the lower triangle.
   cholmod_sparse header = wrap(A, factor_->is_super ? 1 : -1);
+  if (prepermuted_.active) {
+    const double* values = A.valuePtr();
+    for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
+      prepermuted_.values[k] = values[prepermuted_.source[k]];
+    }
+    header = prepermuted_view();
+  }
   cholmod_factorize(&header, factor_, &common_);
   if (common_.status < CHOLMOD_OK) {
     throw std::runtime_error(cholmod_error("cholmod_factorize", common_.status));
@@ -244,7 +327,12 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
     rhs.ncol = 1;
     rhs.nzmax = static_cast<size_t>(n_);
     rhs.d = static_cast<size_t>(n_);
-    rhs.x = const_cast<double*>(b.data());  // read only
+    const double* rhs_values = b.data();
+    if (prepermuted_.active) {
+      for (int k = 0; k < n_; ++k) prepermuted_.rhs[k] = b[prepermuted_.perm[k]];
+      rhs_values = prepermuted_.rhs.data();
+    }
+    rhs.x = const_cast<double*>(rhs_values);  // read only
     rhs.z = nullptr;
     rhs.xtype = CHOLMOD_REAL;
     rhs.dtype = CHOLMOD_DOUBLE;
@@ -261,7 +349,11 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
     }
     if (x->size() != n_) x->resize(n_);
     const double* solution = static_cast<const double*>(solution_->x);
-    std::copy(solution, solution + n_, x->data());
+    if (prepermuted_.active) {
+      for (int k = 0; k < n_; ++k) (*x)[prepermuted_.perm[k]] = solution[k];
+    } else {
+      std::copy(solution, solution + n_, x->data());
+    }
   }
   ++counters_.solves;
   counters_.solve_seconds += seconds_since(start);

@@ -470,6 +470,41 @@ TEST(CholmodSolverTest, ClothGridPatternPicksSupernodalLltAndSolves) {
   EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
 }
 
+// A supernodal factor is computed from P A P^T, whose pattern the analysis
+// formed with the slot of A each entry comes from: every factorization
+// takes A's current values, and solves permute in and out. Two matrices of
+// one pattern in turn, then a negative definite one, which falls back to
+// LDL^T (analyzed again, simplicial, from A itself).
+TEST(CholmodSolverTest, SupernodalFactorsThePermutedMatrixFormedAtTheAnalysis) {
+  const SparseMatrix A = cloth_matrix(40, 70);  // 4,800 DOFs
+  SparseMatrix B = A;
+  for (int k = 0; k < B.nonZeros(); ++k) B.valuePtr()[k] *= 1.0 + 0.1 * std::sin(k);
+  B = SparseMatrix(0.5 * (B + SparseMatrix(B.transpose())));
+  B.diagonal().array() += 10.0;
+  ASSERT_EQ(B.nonZeros(), A.nonZeros());
+  const SparseMatrix& C = B;
+  CholmodSolver solver;
+  solver.analyze(A);
+  ASSERT_EQ(solver.method(), "cholmod-supernodal-llt");
+  EXPECT_NE(solver.factorization_note().find("P A P^T formed at the analysis"), std::string::npos)
+      << solver.factorization_note();
+  const Eigen::VectorXd b = random_vector(A.rows(), 71);
+  Eigen::VectorXd x(A.rows());
+  for (const SparseMatrix* M : {&A, &C, &A}) {
+    ASSERT_TRUE(solver.factorize(*M));
+    solver.solve(b, &x);
+    EXPECT_LT(relative_residual(*M, x, b), kResidualTolerance);
+  }
+  EXPECT_GT(relative_residual(B, x, b), 1e-6);  // B's solve is not A's
+  const SparseMatrix negative = -A;
+  testing::internal::CaptureStderr();
+  ASSERT_TRUE(solver.factorize(negative));
+  testing::internal::GetCapturedStderr();
+  EXPECT_EQ(solver.method(), "cholmod-ldlt");
+  solver.solve(b, &x);
+  EXPECT_LT(relative_residual(negative, x, b), kResidualTolerance);
+}
+
 // The LDL^T fallback re-analyzes as simplicial whichever LL^T was chosen; a
 // banded indefinite matrix takes it from simplicial LL^T.
 TEST(CholmodSolverTest, SimplicialLltFallsBackToLdltOnIndefiniteBandedMatrix) {

@@ -58,6 +58,13 @@ class CholmodSolver final : public LinearSolver {
   // triangle (stype -1) or the upper one (+1).
   cholmod_sparse wrap(const SparseMatrix& A, int stype = -1) const;
   void analyze_with_cholmod(const SparseMatrix& pattern);
+  // A supernodal LL^T factor of P A P^T (P: the analysis's permutation)
+  // analyzed in the natural ordering, fed by prepermuted_ (see the
+  // definition); false, with the factor left as it was, where the
+  // reanalysis does not reproduce it.
+  bool prepermute(const SparseMatrix& pattern);
+  // CHOLMOD's view of prepermuted_'s matrix.
+  cholmod_sparse prepermuted_view();
   // One numeric factorization in the current mode, taking the fallbacks.
   bool factorize_with_fallback(const SparseMatrix& A);
   void switch_mode(Mode next, const std::string& why);
@@ -78,6 +85,16 @@ class CholmodSolver final : public LinearSolver {
   // silently factor garbage.
   std::vector<int> outer_, inner_;
   bool factored_ = false;
+  // The supernodal path: tril(P A P^T) in CHOLMOD's column form, each entry
+  // taken from A's slot source[k] at every factorization; perm[k] is the
+  // row of A that row k of it holds. Right-hand sides and solutions are
+  // permuted here (through rhs).
+  struct Prepermuted {
+    bool active = false;
+    std::vector<int> outer, inner, source, perm;
+    std::vector<double> values;
+    Eigen::VectorXd rhs;
+  } prepermuted_;
 };
 
 }  // namespace stiffsim
