@@ -39,6 +39,25 @@ std::string format_ratio(double value) {
   return text;
 }
 
+// CHOLMOD's view of a square compressed matrix of n columns: CHOLMOD takes
+// non-const pointers but only reads them (analyze, factorize).
+cholmod_sparse view(int n, std::size_t nonzeros, const int* outer, const int* inner,
+                    const double* values, int stype) {
+  cholmod_sparse header{};
+  header.nrow = header.ncol = static_cast<std::size_t>(n);
+  header.nzmax = nonzeros;
+  header.p = const_cast<int*>(outer);
+  header.i = const_cast<int*>(inner);
+  header.x = const_cast<double*>(values);
+  header.stype = stype;
+  header.itype = CHOLMOD_INT;
+  header.xtype = CHOLMOD_REAL;
+  header.dtype = CHOLMOD_DOUBLE;
+  header.sorted = 1;
+  header.packed = 1;
+  return header;
+}
+
 }  // namespace
 
 CholmodSolver::CholmodSolver() {
@@ -63,25 +82,10 @@ void CholmodSolver::free_factor_and_workspace() {
 }
 
 cholmod_sparse CholmodSolver::wrap(const SparseMatrix& A, int stype) const {
-  // CHOLMOD takes non-const pointers but reads A only (analyze, factorize).
-  cholmod_sparse header{};
-  header.nrow = static_cast<size_t>(A.rows());
-  header.ncol = static_cast<size_t>(A.cols());
-  header.nzmax = static_cast<size_t>(A.nonZeros());
-  header.p = const_cast<int*>(A.outerIndexPtr());
-  header.i = const_cast<int*>(A.innerIndexPtr());
-  header.nz = nullptr;
-  header.x = const_cast<double*>(A.valuePtr());
-  header.z = nullptr;
   // The Eigen matrix holds both triangles; CHOLMOD reads the one stype
   // names and ignores the rest, which saves building a triangular copy.
-  header.stype = stype;
-  header.itype = CHOLMOD_INT;
-  header.xtype = CHOLMOD_REAL;
-  header.dtype = CHOLMOD_DOUBLE;
-  header.sorted = 1;
-  header.packed = 1;
-  return header;
+  return view(static_cast<int>(A.rows()), static_cast<std::size_t>(A.nonZeros()), A.outerIndexPtr(),
+              A.innerIndexPtr(), A.valuePtr(), stype);
 }
 
 void CholmodSolver::analyze(const SparseMatrix& pattern) {
@@ -192,19 +196,9 @@ bool CholmodSolver::prepermute(const SparseMatrix& pattern) {
 }
 
 cholmod_sparse CholmodSolver::prepermuted_view() {
-  cholmod_sparse lower{};
-  lower.nrow = lower.ncol = static_cast<size_t>(n_);
-  lower.nzmax = prepermuted_.inner.size();
-  lower.p = prepermuted_.outer.data();
-  lower.i = prepermuted_.inner.data();
-  lower.x = prepermuted_.values.data();
-  lower.stype = -1;  // the natural ordering's fastest form (no transpose)
-  lower.itype = CHOLMOD_INT;
-  lower.xtype = CHOLMOD_REAL;
-  lower.dtype = CHOLMOD_DOUBLE;
-  lower.sorted = 1;
-  lower.packed = 1;
-  return lower;
+  // Lower (stype -1): the natural ordering's form that needs no transpose.
+  return view(n_, prepermuted_.inner.size(), prepermuted_.outer.data(), prepermuted_.inner.data(),
+              prepermuted_.values.data(), -1);
 }
 
 bool CholmodSolver::factorize(const SparseMatrix& A) {
