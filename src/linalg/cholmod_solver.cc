@@ -173,17 +173,18 @@ bool CholmodSolver::prepermute(const SparseMatrix& pattern) {
   pre.rhs.resize(n);
   prepermuted_ = std::move(pre);
   cholmod_sparse lower = prepermuted_view();
-  const cholmod_common saved = common_;
+  const int nmethods = common_.nmethods, ordering = common_.method[0].ordering;
+  const int postorder = common_.postorder, supernodal = common_.supernodal;
   common_.nmethods = 1;
   common_.method[0].ordering = CHOLMOD_NATURAL;
   common_.postorder = false;
   common_.supernodal = CHOLMOD_SUPERNODAL;
   cholmod_factor* natural = cholmod_analyze(&lower, &common_);
   // Only the settings: the statistics (fl, lnz) stay the first analysis's.
-  common_.nmethods = saved.nmethods;
-  common_.method[0].ordering = saved.method[0].ordering;
-  common_.postorder = saved.postorder;
-  common_.supernodal = saved.supernodal;
+  common_.nmethods = nmethods;
+  common_.method[0].ordering = ordering;
+  common_.postorder = postorder;
+  common_.supernodal = supernodal;
   if (natural == nullptr || natural->ordering != CHOLMOD_NATURAL || !natural->is_super ||
       natural->xsize != factor_->xsize || natural->nsuper != factor_->nsuper) {
     cholmod_free_factor(&natural, &common_);
@@ -228,18 +229,20 @@ bool CholmodSolver::factorize(const SparseMatrix& A) {
 bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   if (mode_ == Mode::kUmfpack) return umfpack_->factorize(A);
 
-  // A permuted supernodal factorization reads the upper triangle with one
-  // permuted transpose of A, the lower with two (the second a copy);
-  // simplicial ones the reverse (cholmod_factorize). Each allocates and
-  // frees its copy: on cloth_stiff.yaml the transposes took 6.7% of the
-  // run's time with the lower triangle.
-  cholmod_sparse header = wrap(A, factor_->is_super ? 1 : -1);
+  cholmod_sparse header;
   if (prepermuted_.active) {
     const double* values = A.valuePtr();
     for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
       prepermuted_.values[k] = values[prepermuted_.source[k]];
     }
     header = prepermuted_view();
+  } else {
+    // A permuted supernodal factorization reads the upper triangle with one
+    // permuted transpose of A, the lower with two (the second a copy);
+    // simplicial ones the reverse (cholmod_factorize). Each allocates and
+    // frees its copy: on cloth_stiff.yaml the transposes took 6.7% of the
+    // run's time with the lower triangle.
+    header = wrap(A, factor_->is_super ? 1 : -1);
   }
   cholmod_factorize(&header, factor_, &common_);
   if (common_.status < CHOLMOD_OK) {
