@@ -66,6 +66,29 @@ void UmfpackSolver::analyze(const SparseMatrix& pattern) {
   n_ = static_cast<int>(pattern.rows());
   int_workspace_.assign(n_, 0);
   double_workspace_.assign(5 * static_cast<std::size_t>(n_), 0.0);
+  // The ordering strategy. Every Newton matrix given here has a zero-free
+  // diagonal (IE's [I, -h N; -h K, M - h D] and I - h J, VIE's
+  // M - h D - h^2 K N), and eliminating the identity block first leaves
+  // VIE's matrix, definite with the spring clamp: the symmetric strategy
+  // (AMD on A + A^T, diagonal pivots where they are within
+  // UMFPACK_SYM_PIVOT_TOLERANCE of the column's largest) finds that.
+  // UMFPACK's automatic choice sees IE's pattern as only half symmetric
+  // (the q rows hold two blocks, the v rows many) and takes the
+  // unsymmetric strategy (COLAMD, pivot rows by sparsity), whose L U was
+  // twice as large: for IE on the 32x32 cloth 2.18 M entries against
+  // 0.94 M, on the 60x60 cloth 10.2 M against 5.2 M; with the symmetric
+  // strategy its factorizations took 1/1.9 and its solves 1/2.3-1/3.8 of
+  // the time. Without a full diagonal the choice stays UMFPACK's.
+  bool full_diagonal = n_ > 0;
+  for (int j = 0; j < n_ && full_diagonal; ++j) {
+    const int* begin = matrix_.innerIndexPtr() + matrix_.outerIndexPtr()[j];
+    const int* end = matrix_.innerIndexPtr() + matrix_.outerIndexPtr()[j + 1];
+    full_diagonal = std::binary_search(begin, end, j);
+  }
+  control_[UMFPACK_STRATEGY] = full_diagonal ? UMFPACK_STRATEGY_SYMMETRIC : UMFPACK_STRATEGY_AUTO;
+  factorization_note_ = full_diagonal
+                            ? "UMFPACK symmetric strategy (AMD on A + A^T): a zero-free diagonal"
+                            : "UMFPACK's own strategy: the diagonal has structural zeros";
   // UMFPACK rejects n = 0; an empty system needs no factorization at all.
   if (n_ > 0) {
     // Ax = nullptr: the values are only used for statistics, and the pattern

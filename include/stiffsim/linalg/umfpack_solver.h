@@ -1,8 +1,9 @@
 #pragma once
 // Sparse LU (UMFPACK, unsymmetric-pattern multifrontal) for unsymmetric
 // iteration matrices, and the last resort of CholmodSolver when even LDL^T
-// fails. Symbolic analysis once per pattern, numeric factorization per values,
-// solves with iterative refinement into preallocated workspace.
+// fails. Symbolic analysis once per pattern (the symmetric strategy where the
+// diagonal is zero-free, as every Newton matrix's is), numeric factorization
+// per values, solves into preallocated workspace.
 
 #include <umfpack.h>
 
