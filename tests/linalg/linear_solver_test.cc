@@ -336,24 +336,32 @@ TEST(CholmodSolverTest, IndefiniteMatrixFallsBackToLdltOnceAndStillSolves) {
   EXPECT_EQ(solver.counters().factorizations, 3);
 }
 
+// [[0, L], [L, 0]], with the diagonal's zeros explicit in the pattern or
+// absent from it.
+SparseMatrix swapped_blocks(const SparseMatrix& L, bool explicit_zero_diagonal) {
+  const int half = static_cast<int>(L.rows()), n = 2 * half;
+  std::vector<Eigen::Triplet<double>> triplets;
+  for (int j = 0; j < L.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(L, j); it; ++it) {
+      triplets.emplace_back(it.row(), half + it.col(), it.value());
+      triplets.emplace_back(half + it.row(), it.col(), it.value());
+    }
+  }
+  if (explicit_zero_diagonal) {
+    for (int k = 0; k < n; ++k) triplets.emplace_back(k, k, 0.0);
+  }
+  SparseMatrix A(n, n);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  A.makeCompressed();
+  return A;
+}
+
 // [[0, L], [L, 0]] with L a shifted Laplacian: nonsingular, but every diagonal
 // entry is zero, so LDL^T without pivoting meets a zero pivot whatever the
 // ordering, and only UMFPACK's pivoting gets through.
 TEST(CholmodSolverTest, ZeroDiagonalFallsBackToUmfpack) {
-  const int m = 15;
-  const SparseMatrix L = random_spd(m, 40);
-  const int n = 2 * m * m;
-  std::vector<Eigen::Triplet<double>> triplets;
-  for (int j = 0; j < L.outerSize(); ++j) {
-    for (SparseMatrix::InnerIterator it(L, j); it; ++it) {
-      triplets.emplace_back(it.row(), m * m + it.col(), it.value());
-      triplets.emplace_back(m * m + it.row(), it.col(), it.value());
-    }
-  }
-  for (int k = 0; k < n; ++k) triplets.emplace_back(k, k, 0.0);  // explicit zeros
-  SparseMatrix A(n, n);
-  A.setFromTriplets(triplets.begin(), triplets.end());
-  A.makeCompressed();
+  const SparseMatrix A = swapped_blocks(random_spd(15, 40), true);
+  const int n = static_cast<int>(A.rows());
 
   CholmodSolver solver;
   solver.analyze(A);
@@ -589,20 +597,9 @@ TEST(UmfpackSolverTest, ZeroFreeDiagonalTakesTheSymmetricStrategyAndItsFill) {
 }
 
 TEST(UmfpackSolverTest, StructuralZerosOnTheDiagonalLeaveTheStrategyToUmfpack) {
-  // [0 L; L 0]: no diagonal entry at all.
-  const int m = 12;
-  const SparseMatrix L = random_spd(m, 73);
-  const int n = 2 * m * m;
-  std::vector<Eigen::Triplet<double>> triplets;
-  for (int j = 0; j < L.outerSize(); ++j) {
-    for (SparseMatrix::InnerIterator it(L, j); it; ++it) {
-      triplets.emplace_back(it.row(), m * m + it.col(), it.value());
-      triplets.emplace_back(m * m + it.row(), it.col(), it.value());
-    }
-  }
-  SparseMatrix A(n, n);
-  A.setFromTriplets(triplets.begin(), triplets.end());
-  A.makeCompressed();
+  // No diagonal entry at all.
+  const SparseMatrix A = swapped_blocks(random_spd(12, 73), false);
+  const int n = static_cast<int>(A.rows());
   UmfpackSolver solver;
   solver.analyze(A);
   EXPECT_NE(solver.factorization_note().find("UMFPACK's own strategy"), std::string::npos)
