@@ -96,7 +96,7 @@ def main():
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     for reserved in ("--accuracy", "--stats"):
-        if reserved in args.options:
+        if any(o == reserved or o.startswith(reserved + "=") for o in args.options):
             parser.error("%s is set by the ensemble; leave it out of the run options" % reserved)
     if not 0.0 < args.accuracy * (1.0 + PERTURBATION * (args.runs - 1)) <= 1.0:
         parser.error("--accuracy must stay in (0, 1] for every start")

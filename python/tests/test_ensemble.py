@@ -52,6 +52,9 @@ def test_refuses_what_it_sets_itself(built, tmp_path):
     result = ensemble("--runs", 2, CLI, *RUN, "--accuracy", "1e-4")
     assert result.returncode == 2
     assert "--accuracy is set by the ensemble" in result.stderr
+    result = ensemble("--runs", 2, CLI, *RUN, "--stats=s.json")
+    assert result.returncode == 2
+    assert "--stats is set by the ensemble" in result.stderr
 
 
 def test_a_failed_run_stops_it_and_writes_nothing(built, tmp_path):
