@@ -256,7 +256,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   krylov_excess_seconds_ = 0.0;
   refactor_due_ = refactor_failed_ = false;
   if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
-  if (!newton_solve_chosen_) choose_newton_solve(matrix.rows());
+  if (!newton_solve_chosen_) choose_newton_solve(matrix.rows(), dims_.nv);
   return m.factored;
 }
 
@@ -266,7 +266,7 @@ bool ImplicitIntegrator::form_and_factor(double h) {
   return factor_iteration_matrix(matrix, symmetric, h);
 }
 
-void ImplicitIntegrator::choose_newton_solve(long unknowns) {
+void ImplicitIntegrator::choose_newton_solve(long unknowns, long velocities) {
   // GMRES needs only a factorization to precondition with, of any kind
   // (LL^T, LDL^T, LU). Small systems, solved dense, keep the direct path:
   // there a factorization costs about what a few Krylov products do.
@@ -284,7 +284,7 @@ void ImplicitIntegrator::choose_newton_solve(long unknowns) {
   } else if (!sparse) {
     newton_solve_reason_ = "the iteration matrix is solved by " + method +
                            " (small or dense: a direct solve is cheapest)";
-  } else if (asked == NewtonSolve::kAuto && unknowns <= kSmallSystemMaxSize) {
+  } else if (asked == NewtonSolve::kAuto && velocities <= kSmallSystemMaxSize) {
     // Small sparse systems (SmallSystems::kByDensity) keep the chord: its
     // reused sparse factor already makes the solves cheap, and the chord is
     // deterministic, where the Krylov path's cost model follows wall-clock
@@ -293,8 +293,16 @@ void ImplicitIntegrator::choose_newton_solve(long unknowns) {
     // 1e-5 ends on the chord's rate test at the dense path's error
     // (2.9e-4 m against RK45 at 1e-10); on the Krylov path it ended 3-5x
     // further from it, where the extrapolation amplified its looser solves.
-    newton_solve_reason_ = "auto: small system (n = " + std::to_string(unknowns) +
-                           " <= " + std::to_string(kSmallSystemMaxSize) + ") on " + method +
+    // Counted in velocities: IE's matrix over (q, v) reduces to VIE's over v
+    // once its identity block is eliminated (UMFPACK's symmetric strategy
+    // does that), so the same rope is as small for both. Counted in IE's
+    // unknowns (294), the rope went to the Krylov path, whose
+    // refactorizations at the iterates carry transverse stiffness the rest
+    // state's factor lacks (an L U of 2,900 entries against 1,200): the
+    // precision report's IE runs took 1.1-2x their time at aa7add7.
+    newton_solve_reason_ = "auto: small system (" + std::to_string(velocities) +
+                           " velocities <= " + std::to_string(kSmallSystemMaxSize) + ", " +
+                           std::to_string(unknowns) + " unknowns) on " + method +
                            ": the chord (deterministic; the factor is reused over many steps)";
   } else {
     krylov_ = true;

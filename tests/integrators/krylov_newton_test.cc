@@ -97,9 +97,20 @@ TEST(KrylovNewton, SmallSystemsWithAConstantMassMatrixGoSparse) {
   EXPECT_NE(r.linear_solver_reason.find("n = 186 <= 200 and density 17"), std::string::npos)
       << r.linear_solver_reason;
   EXPECT_EQ(r.newton_solve, "chord");
-  EXPECT_NE(r.newton_solve_reason.find("small system (n = 186 <= 200)"), std::string::npos)
+  EXPECT_NE(r.newton_solve_reason.find("small system (186 velocities <= 200, 186 unknowns)"),
+            std::string::npos)
       << r.newton_solve_reason;
   EXPECT_EQ(vie->statistics().krylov_solves, 0);
+  // IE's matrix over (q, v) has twice the unknowns but reduces to VIE's:
+  // the same sheet is small for it too.
+  auto ie = make(Method::kIe, *cloth8, 1.0 / 60, 1e-3, NewtonSolve::kAuto);
+  ie->initialize(cloth8->initial_state());
+  ie->integrate_to(0.1);
+  EXPECT_EQ(ie->report().newton_solve, "chord");
+  EXPECT_NE(ie->report().newton_solve_reason.find("186 velocities <= 200, 372 unknowns"),
+            std::string::npos)
+      << ie->report().newton_solve_reason;
+  EXPECT_EQ(ie->statistics().krylov_solves, 0);
   // Asked for, the Krylov path runs on that factor all the same.
   auto krylov = make(Method::kVie, *cloth8, 1.0 / 60, 1e-3, NewtonSolve::kKrylov);
   krylov->initialize(cloth8->initial_state());

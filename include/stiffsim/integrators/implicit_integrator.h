@@ -326,7 +326,7 @@ class ImplicitIntegrator : public IntegratorBase {
                         const Eigen::VectorXd& rhs, double forcing, bool may_abandon,
                         Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
-  void choose_newton_solve(long unknowns);
+  void choose_newton_solve(long unknowns, long velocities);
   // Jacobian at the iterate x itself (full Newton, the Krylov path); marks
   // it stale for the reuse ladder.
   void compute_jacobian_at_iterate(double tf, double h, const Eigen::VectorXd& x0,
