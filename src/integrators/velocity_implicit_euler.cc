@@ -52,6 +52,7 @@ void VelocityImplicitEuler::do_initialize() {
   residual_state_.resize(d.nx());
   predicted_.resize(d.nx());
   start_iterate_.resize(d.nx());
+  guess_iterate_.resize(d.nx());
   energy_state_.x = Eigen::VectorXd::Zero(d.nx());
   dv_.resize(d.nv);
   qdot_.resize(d.nq);
@@ -377,6 +378,15 @@ const Eigen::VectorXd& VelocityImplicitEuler::first_iterate(double h,
   if (!(g_start < g_predicted)) return predicted;
   ++stats_.predictor_declined;
   return start_iterate_;
+}
+
+double VelocityImplicitEuler::guess_potential(double t0, double h, const Eigen::VectorXd& x0,
+                                              const Eigen::VectorXd& x) {
+  if (!has_potential()) return std::numeric_limits<double>::quiet_NaN();
+  load_mass_diagonal(x0);  // all G needs here of begin_newton()
+  guess_iterate_ = x;
+  complete_iterate(h, x0, &guess_iterate_);
+  return incremental_potential(t0 + h, x0, guess_iterate_, h, false);
 }
 
 bool VelocityImplicitEuler::do_step(double h) {

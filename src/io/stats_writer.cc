@@ -25,7 +25,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 64 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 65 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -54,6 +54,7 @@ json statistics_object(const IntegratorStatistics& s) {
   j["energy_guard_rejections"] = s.energy_guard_rejections;
   j["extrapolation_rejections"] = s.extrapolation_rejections;
   j["predictor_declined"] = s.predictor_declined;
+  j["step_guesses_corrected"] = s.step_guesses_corrected;
   j["merit_damping_evaluations"] = s.merit_damping_evaluations;
   j["velocity_map_evaluations"] = s.velocity_map_evaluations;
   j["mass_matrix_assemblies"] = s.mass_matrix_assemblies;

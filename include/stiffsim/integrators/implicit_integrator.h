@@ -79,6 +79,11 @@ struct ImplicitSettings {
   // matrices with the springs' primal-dual tension estimate
   // (JacobianRequest::tension_positions). false: the exact tension.
   bool tension_estimate = true;
+  // Step doubling (error control, --error-estimate): the three solves start
+  // from first iterates corrected by the last step's estimate of x'' where
+  // the step's incremental potential G says the corrected one is lower (see
+  // ImplicitIntegrator::step_doubling). false: the uncorrected ones.
+  bool corrected_guesses = true;
   // Full Newton on the Krylov path's machinery (auto's fresh start, the
   // rescue at fixed steps) finishes with GMRES on the exact Jacobian where
   // a finishing solve's products cost less than this share of a Jacobian
@@ -230,6 +235,13 @@ class ImplicitIntegrator : public IntegratorBase {
   // Whether potential() is available at all (the Krylov path searches on it
   // from the first iteration).
   virtual bool has_potential() const { return false; }
+  // G (without its damping term) at the first iterate x, completed, of a
+  // step of size h from x0 at t0; NaN where the method has no potential.
+  virtual double guess_potential(double t0, double h, const Eigen::VectorXd& x0,
+                                 const Eigen::VectorXd& x) {
+    (void)t0, (void)h, (void)x0, (void)x;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
   // G at the iterate x (new_iterate: a new Newton iterate, where G's
   // frozen terms are taken; false: a line-search trial point, with those
   // of the last iterate). jacobian_at_x: jacobians_ were just evaluated at
@@ -254,6 +266,14 @@ class ImplicitIntegrator : public IntegratorBase {
   // 2 x_small - x_big), the error is x_big - x_small. The full step's work
   // counts as the error estimator's (as in Drake).
   bool step_doubling(double h);
+  // guess + c x'' (the estimate from the last step doubling, where it is
+  // smooth) into *corrected, or guess. With decide (the big step), the
+  // correction is trusted where G of the step of size h from x0 at t0 is
+  // lower there (or the method has no G); otherwise (the first half step)
+  // it follows that decision.
+  const Eigen::VectorXd& corrected_guess(double t0, double h, const Eigen::VectorXd& x0,
+                                         const Eigen::VectorXd& guess, double c, bool decide,
+                                         Eigen::VectorXd* corrected);
   // Fixed steps without an error estimate: whether the converged step *x of
   // size h from (t0, x0) is the step's root, or a root of the step
   // equations the minimizer of G is not (see the definition). Consulted
@@ -302,6 +322,14 @@ class ImplicitIntegrator : public IntegratorBase {
   ForceJacobians jacobians_;
   bool jacobians_valid_ = false;
   Eigen::VectorXd x_big_, x_half_, x_small_;
+  // Step doubling's estimate of x'' (4 (x_big - x_small) / h^2), made by
+  // the doubling that started at second_derivative_t0_, the one before it,
+  // whether the two agree (smooth) and whether this step's big-step guess
+  // took it (trusted), and the first iterates built with it
+  // (corrected_guess()).
+  Eigen::VectorXd second_derivative_, second_derivative_previous_, x_guess_, x_uncorrected_;
+  double second_derivative_t0_ = std::numeric_limits<double>::quiet_NaN();
+  bool second_derivative_smooth_ = false, second_derivative_trusted_ = false;
   Eigen::VectorXd linearization_;  // where compute_force_jacobians_ahead() linearized
   // Acceleration (and the rates it comes from) where the Jacobian is taken,
   // for the inertial term of a configuration-dependent M.
@@ -397,6 +425,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // A factorization formed for a step more than this factor away from the
   // current one is refactored before its first use (refresh_matrices).
   static constexpr double kReuseStepRatio = 4.0;
+  // The tolerance an iterate that gained energy is polished to before the
+  // energy guard judges it, in the solve's tolerance (see newton()).
+  static constexpr double kGuardPolish = 0.01;
   // The Krylov path's Newton iteration budget, in max_newton_iterations
   // (see newton()).
   static constexpr int kKrylovIterationFactor = 5;

@@ -48,6 +48,9 @@ struct IntegratorStatistics {
   // rather than from the predictor, which was a higher point of the
   // incremental potential (see VelocityImplicitEuler::first_iterate()).
   long predictor_declined = 0;
+  // Step doubling's first iterates that took the correction by the last
+  // estimate of x'' (see ImplicitSettings::corrected_guesses).
+  long step_guesses_corrected = 0;
   long velocity_map_evaluations = 0;  // N(q) products and assemblies (0 when N = I)
   long mass_matrix_assemblies = 0;    // 1 for a constant M
   long symbolic_analyses = 0;         // sparse orderings / elimination trees
@@ -72,7 +75,9 @@ struct IntegratorStatistics {
   // set (ImplicitSettings::step_error_tolerance).
   long newton_tolerance_from_step_error = 0;
   // ... and of those, solves narrowed back to kappa * accuracy because an
-  // iterate gained energy (the energy guard judges roots, see newton()).
+  // iterate gained energy (the energy guard judges roots, see newton());
+  // also the solves whose tolerance was cut to kGuardPolish of itself
+  // because the iterate it accepted gained energy.
   long newton_tolerance_narrowed = 0;
   long krylov_solves = 0;
   long krylov_iterations = 0;

@@ -52,6 +52,8 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   const Eigen::VectorXd& residual_scaling() override;
   const Eigen::VectorXd& predictor(double h, const Eigen::VectorXd& x0) override;
   bool has_potential() const override { return use_potential_merit_; }
+  double guess_potential(double t0, double h, const Eigen::VectorXd& x0,
+                         const Eigen::VectorXd& x) override;
   void begin_newton(double t0, double h, const Eigen::VectorXd& x0) override;
   bool potential_search(int trial) const override;
   double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double h,
@@ -75,6 +77,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   bool use_potential_merit_ = false;
   Eigen::VectorXd predicted_;  // predictor()'s result
   Eigen::VectorXd start_iterate_;  // first_iterate()'s v = v_n
+  Eigen::VectorXd guess_iterate_;  // guess_potential()'s completed iterate
   // Fixed steps without an estimate: the last step's local error estimate
   // |v - v_pred| / 2 (see do_step()) and the step it was taken with.
   double step_error_ = 0.0, step_error_h_ = 0.0;
