@@ -79,10 +79,13 @@ struct ImplicitSettings {
   // matrices with the springs' primal-dual tension estimate
   // (JacobianRequest::tension_positions). false: the exact tension.
   bool tension_estimate = true;
-  // Step doubling (error control, --error-estimate): the three solves start
-  // from first iterates corrected by the last step's estimate of x'' where
-  // the step's incremental potential G says the corrected one is lower (see
-  // ImplicitIntegrator::step_doubling). false: the uncorrected ones.
+  // Step doubling (error control, --error-estimate): the big and first half
+  // steps start from first iterates corrected by the last doubling's
+  // estimate of x'' where that estimate is smooth and, for methods with an
+  // incremental potential G, where the corrected big-step guess lowers G;
+  // the second half step from x_half + (x_big - x_n) / 2 (see
+  // ImplicitIntegrator::step_doubling). false: the uncorrected guesses
+  // (the midpoint and x_big; the predictor stays).
   bool corrected_guesses = true;
   // Full Newton on the Krylov path's machinery (auto's fresh start, the
   // rescue at fixed steps) finishes with GMRES on the exact Jacobian where
