@@ -256,7 +256,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   krylov_excess_seconds_ = 0.0;
   refactor_due_ = refactor_failed_ = false;
   if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
-  if (!newton_solve_chosen_) choose_newton_solve(matrix.rows(), dims_.nv);
+  if (!newton_solve_chosen_) choose_newton_solve(matrix.rows());
   return m.factored;
 }
 
@@ -266,7 +266,8 @@ bool ImplicitIntegrator::form_and_factor(double h) {
   return factor_iteration_matrix(matrix, symmetric, h);
 }
 
-void ImplicitIntegrator::choose_newton_solve(long unknowns, long velocities) {
+void ImplicitIntegrator::choose_newton_solve(long unknowns) {
+  const long velocities = dims_.nv;
   // GMRES needs only a factorization to precondition with, of any kind
   // (LL^T, LDL^T, LU). Small systems, solved dense, keep the direct path:
   // there a factorization costs about what a few Krylov products do.
@@ -348,7 +349,7 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
   second_derivative_t0_ = std::numeric_limits<double>::quiet_NaN();  // no estimate yet
   second_derivative_smooth_ = second_derivative_trusted_ = false;
   for (Eigen::VectorXd* v : {&x_big_, &x_half_, &x_small_, &dx_, &x_trial_, &second_derivative_,
-                             &second_derivative_previous_, &x_guess_, &x_uncorrected_}) {
+                             &second_derivative_previous_, &x_guess_}) {
     v->resize(nx);
   }
   for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_, &chord_update_}) v->resize(unknowns);
@@ -1504,6 +1505,8 @@ const Eigen::VectorXd& ImplicitIntegrator::corrected_guess(double t0, double h,
       !(second_derivative_t0_ >= previous_.t && second_derivative_t0_ <= t0)) {
     return guess;
   }
+  if (!decide && !second_derivative_trusted_) return guess;
+  *corrected = guess + c * second_derivative_;
   if (decide) {
     // Trusted where the corrected guess is the lower point of G. A stiff
     // sheet's estimate holds its stiff springs' stretch, which differs
@@ -1512,17 +1515,11 @@ const Eigen::VectorXd& ImplicitIntegrator::corrected_guess(double t0, double h,
     // error control at 1e-2..1e-4: 1.08-1.12x the time with smooth
     // estimates trusted, 0.99-1.03x guarded. One decision per step: a
     // second for the half step cost 4% on the 16x16 sheet of k = 1e3.
-    second_derivative_trusted_ = false;
-    *corrected = guess + c * second_derivative_;
     if (has_potential() &&
         !(guess_potential(t0, h, x0, *corrected) < guess_potential(t0, h, x0, guess))) {
       return guess;
     }
     second_derivative_trusted_ = true;
-  } else if (!second_derivative_trusted_) {
-    return guess;
-  } else {
-    *corrected = guess + c * second_derivative_;
   }
   ++stats_.step_guesses_corrected;
   return *corrected;
@@ -1556,17 +1553,17 @@ bool ImplicitIntegrator::step_doubling(double h) {
   // 0.94-1.02x (1e-3..1e-5) and of k = 1e6 0.98-1.04x (1e-2, 1e-3).
   const Eigen::VectorXd& predicted = predictor(h, x0);
   const double p = t0 - previous_.t;
+  second_derivative_trusted_ = false;  // until the big step's guess takes it
   const Eigen::VectorXd& guess =
       &predicted == &x0 ? x0
                         : corrected_guess(t0, h, x0, predicted, h * h + h * p / 4, true, &x_guess_);
-  if (&predicted == &x0) second_derivative_trusted_ = false;
   const bool big_ok = solve_step(t0, h, x0, guess, &x_big_);
   add_estimator_share(before, &stats_);
   if (!big_ok) return false;
 
-  x_uncorrected_ = 0.5 * (x0 + x_big_);
+  x_half_ = 0.5 * (x0 + x_big_);
   const Eigen::VectorXd& half_guess =
-      corrected_guess(t0, 0.5 * h, x0, x_uncorrected_, -0.25 * h * h, false, &x_guess_);
+      corrected_guess(t0, 0.5 * h, x0, x_half_, -0.25 * h * h, false, &x_guess_);
   if (!solve_step(t0, 0.5 * h, x0, half_guess, &x_small_)) return false;
   x_half_.swap(x_small_);
   if (implicit_.corrected_guesses) {

@@ -330,7 +330,7 @@ class ImplicitIntegrator : public IntegratorBase {
   // whether the two agree (smooth) and whether this step's big-step guess
   // took it (trusted), and the first iterates built with it
   // (corrected_guess()).
-  Eigen::VectorXd second_derivative_, second_derivative_previous_, x_guess_, x_uncorrected_;
+  Eigen::VectorXd second_derivative_, second_derivative_previous_, x_guess_;
   double second_derivative_t0_ = std::numeric_limits<double>::quiet_NaN();
   bool second_derivative_smooth_ = false, second_derivative_trusted_ = false;
   Eigen::VectorXd linearization_;  // where compute_force_jacobians_ahead() linearized
@@ -357,7 +357,7 @@ class ImplicitIntegrator : public IntegratorBase {
                         const Eigen::VectorXd& rhs, double forcing, bool may_abandon,
                         Eigen::VectorXd* dy);
   // Decides the Newton solve strategy once the first matrix is factored.
-  void choose_newton_solve(long unknowns, long velocities);
+  void choose_newton_solve(long unknowns);
   // Jacobian at the iterate x itself (full Newton, the Krylov path); marks
   // it stale for the reuse ladder.
   void compute_jacobian_at_iterate(double tf, double h, const Eigen::VectorXd& x0,
