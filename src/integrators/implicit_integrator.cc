@@ -442,7 +442,7 @@ ImplicitIntegrator::Refresh ImplicitIntegrator::refresh_matrices(double t, const
 
 bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
                                 const Eigen::VectorXd& guess, int trial, Eigen::VectorXd* x,
-                                bool rescue) {
+                                bool rescue, bool last) {
   const double tf = t0 + h;
   const int offset = unknowns_offset();
   const int n = static_cast<int>(r_.size());
@@ -509,11 +509,30 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // 3,700-4,200 with three, and 0.57x the time (two runs each, in
   // alternation); cloth.yaml and the 60x60 and 100x100 sheets, whose solves
   // rarely fail, took equal times.
-  const int max_iterations = krylov   ? kKrylovIterationFactor * implicit_.max_newton_iterations
-                             : rescue ? 2 * implicit_.max_newton_iterations
-                             : trial == kFullNewtonTrial || structured
-                                 ? 3 * implicit_.max_newton_iterations
-                                 : implicit_.max_newton_iterations;
+  const int budget = krylov   ? kKrylovIterationFactor * implicit_.max_newton_iterations
+                     : rescue ? kRescueIterationFactor * implicit_.max_newton_iterations
+                     : trial == kFullNewtonTrial || structured ? 3 * implicit_.max_newton_iterations
+                                                               : implicit_.max_newton_iterations;
+  // Full Newton as the last rung before the step is halved may end up
+  // circling the root: the rescue of a folding step of cloth.yaml at a
+  // fixed 1/60 held the clamped iteration's updates at 2-5 tolerances and
+  // its residual at 7-40 for 25 iterations before it converged at the
+  // 34th. So past its budget it goes on while its last iterate was near
+  // the root, by both measures (kChordTestGate, kNearRootResidual); far
+  // from it (the first step of a flat sheet of k = 1e9, residuals of 1e6
+  // tolerances, and the k = 1e6 sheet's clamped iterations crawling at
+  // 1e5) the budget ends it as before. Measured on cloth.yaml at 1/60 for
+  // 2 s (30 starts each, bench/ensemble.py): halvings in 3-5 runs of 30
+  // with the budget alone, in none extended, at equal time.
+  const bool extend = implicit_.extend_near_root && last && full_newton && !structured;
+  const int max_iterations =
+      extend ? std::max(budget, kExtendedFactor * implicit_.max_newton_iterations) : budget;
+  bool near_root = false;  // the last iterate, as the extension means it
+  // Whether the iteration after i may run (the last one judges its iterate
+  // as it is).
+  auto another_iteration = [&](int i) {
+    return i + 1 < budget || (i + 1 < max_iterations && near_root);
+  };
   // The forcing term, the linear solve's relative tolerance.
   // - Recursive path: Eisenstat-Walker (their choice 2, with Kelley's
   //   safeguards). The relative tolerance follows the nonlinear residual's
@@ -553,6 +572,10 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   int stalled_updates = 0;  // Krylov updates in a row cut below kStalledStep
   bool polished = false;    // the tolerance cut for the energy guard (below)
   for (int i = 0; i < max_iterations; ++i) {
+    if (i >= budget) {
+      if (!near_root) return false;
+      if (i == budget) ++stats_.last_rung_extensions;
+    }
     const bool finishing_now = finishing;
     if (structured) {
       if (!factor_structured(*x, h)) return false;
@@ -771,6 +794,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // --newton-solve fresh on cloth_stiff.yaml at 1/60 for 2 s: 705
     // Newton iterations instead of 823 (cloth.yaml: 664 instead of 749).
     const double update_size = dx_.segment(offset, n).lpNorm<Eigen::Infinity>();
+    near_root = update_size <= kChordTestGate * solve_tolerance_ &&
+                residual_size <= kNearRootResidual * solve_tolerance_;
     if (finishing_now) {
       // A full update of (inexact) Newton on the exact Jacobian within the
       // tolerance leaves an error of about the forcing term times it, plus
@@ -865,7 +890,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // On the last iteration the guard judges the iterate as it is (halving
     // the step would cost more than its judgement).
     const double accuracy_tolerance = implicit_.newton_kappa * settings_.accuracy;
-    if (solve_tolerance_ > accuracy_tolerance && i + 1 < max_iterations &&
+    if (solve_tolerance_ > accuracy_tolerance && another_iteration(i) &&
         !energy_within_round_off(x0, *x)) {
       solve_tolerance_ = accuracy_tolerance;
       ++stats_.newton_tolerance_narrowed;
@@ -884,7 +909,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     // doubling's corrected guesses they also approach it from beyond (a
     // 3-node undamped rope at accuracy 1e-3: 11 steps of 2,928 rejected
     // unpolished, none polished).
-    if (!polished && guard_energy_ && !energy_guard_suspended_ && i + 1 < max_iterations &&
+    if (!polished && guard_energy_ && !energy_guard_suspended_ && another_iteration(i) &&
         !energy_within_round_off(x0, *x)) {
       polished = true;
       solve_tolerance_ *= kGuardPolish;
@@ -1112,7 +1137,8 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
   for (int k = 0; k < count && !solved; ++k) {
     const auto rung_began = WallClock::now();
     const long iterations_before = stats_.newton_raphson_iterations;
-    solved = newton(t0, h, x0, guess, rungs[k], x, k == rescue_rung);
+    const bool last = k + 1 == count || !reuse_enabled();
+    solved = newton(t0, h, x0, guess, rungs[k], x, k == rescue_rung, last);
     const int owner = rungs[k] == kKrylovTrial       ? kKrylovStart
                       : rungs[k] == kFullNewtonTrial ? kFreshStart
                                                      : kChordStart;

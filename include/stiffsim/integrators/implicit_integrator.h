@@ -92,6 +92,12 @@ struct ImplicitSettings {
   // a finishing solve's products cost less than this share of a Jacobian
   // and factorization (see ImplicitIntegrator::finishing_pays). 0: never.
   double finishing_share = 0.3;
+  // Full Newton as the last rung before the step is halved (the rescue at
+  // fixed steps, the direct ladder's last rung, --newton-solve fresh) goes
+  // on past its iteration budget, up to kExtendedFactor times
+  // max_newton_iterations, while its iterate stays near the root (see
+  // ImplicitIntegrator::newton). false: the budget ends it.
+  bool extend_near_root = true;
   int max_newton_iterations = 10;
   // Newton stops when eta |dx| (or the residual) <= kappa * accuracy
   // (Hairer & Wanner IV.8; see step_error_tolerance for fixed steps); 0.05
@@ -346,9 +352,11 @@ class ImplicitIntegrator : public IntegratorBase {
   Refresh refresh_matrices(double t, const Eigen::VectorXd& x, double h, int trial);
   void compute_jacobian_and_factor(double t, const Eigen::VectorXd& x, double h);
   // `rescue`: the ladder's rescue rung (solve_step), with twice the
-  // ordinary iteration budget.
+  // ordinary iteration budget. `last`: no rung follows before the step is
+  // halved (full Newton then goes on near the root:
+  // ImplicitSettings::extend_near_root).
   bool newton(double t0, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& guess,
-              int trial, Eigen::VectorXd* x, bool rescue = false);
+              int trial, Eigen::VectorXd* x, bool rescue = false, bool last = false);
   // The Krylov path's Newton direction at the iterate x: GMRES
   // (newton_gmres()) preconditioned by the last factorization, which is
   // refactored at x when the cost model or a failed solve says so. False
@@ -434,6 +442,13 @@ class ImplicitIntegrator : public IntegratorBase {
   // The Krylov path's Newton iteration budget, in max_newton_iterations
   // (see newton()).
   static constexpr int kKrylovIterationFactor = 5;
+  // The rescue rung's budget, the last rung's extension near the root, in
+  // max_newton_iterations, and what near means: the last update within
+  // kChordTestGate of the Newton tolerance and the residual within
+  // kNearRootResidual of it (see newton()).
+  static constexpr int kRescueIterationFactor = 2;
+  static constexpr int kExtendedFactor = 8;
+  static constexpr double kNearRootResidual = 100.0;
   // Halvings of a Newton step before the iteration counts as diverged.
   static constexpr int kMaxBacktracks = 8;
   // The Krylov path's line search compares a trial's residual with the

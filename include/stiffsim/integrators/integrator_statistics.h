@@ -70,6 +70,9 @@ struct IntegratorStatistics {
   // after every other rung had failed (instead of halving the step).
   long krylov_newton_failures = 0;
   long fresh_rescues = 0;
+  // Full Newton solves, the last rung before a halving, that went on past
+  // their iteration budget near the root (ImplicitSettings::extend_near_root).
+  long last_rung_extensions = 0;
   // Fixed steps without an error estimate: step attempts (a halved step's
   // retries included) whose Newton tolerance the step's own local error
   // set (ImplicitSettings::step_error_tolerance).
