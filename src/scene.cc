@@ -609,6 +609,18 @@ std::vector<int> Scene::jacobian_colouring_hint() const {
   return colour;
 }
 
+std::vector<std::array<int, 2>> Scene::covered_couplings() const {
+  std::vector<std::array<int, 2>> pairs;
+  if (!attachments_.empty()) return pairs;
+  for (size_t i = 0; i < components_.size(); ++i) {
+    const int offset = offsets_[i].nv;
+    for (const auto& [a, b] : components_[i]->covered_couplings()) {
+      pairs.push_back({a + offset, b + offset});
+    }
+  }
+  return pairs;
+}
+
 double Scene::energy(SystemData& data, const State& s) const {
   if (!caps_.has_energy) return std::nan("");
   Data& d = own(data);

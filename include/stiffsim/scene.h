@@ -77,6 +77,9 @@ class Scene : public System {
   // The components' hints side by side (components share no rows, so their
   // colours may coincide); empty unless every component has one.
   std::vector<int> jacobian_colouring_hint() const override;
+  // The components' pairs, in the scene's indices; none where attachments
+  // couple points (their blocks are not springs').
+  std::vector<std::array<int, 2>> covered_couplings() const override;
   double energy(SystemData&, const State& s) const override;
 
   int component_count() const { return static_cast<int>(components_.size()); }

@@ -5,6 +5,7 @@
 // leave out the work a scene does not need.
 
 #include <Eigen/Core>
+#include <array>
 #include <limits>
 #include <memory>
 #include <string>
@@ -183,6 +184,19 @@ class System {
   // none. JacobianEvaluator checks it and uses it when it needs fewer colours
   // than its greedy colouring.
   virtual std::vector<int> jacobian_colouring_hint() const { return {}; }
+  // Pairs of points whose coupling in the Newton matrix a solver may leave
+  // out of a factorization it uses as an approximation (a preconditioner,
+  // a chord's matrix): each pair (the first velocity index of each point's
+  // three) is coupled by exactly one force element that depends on the
+  // difference of their positions and velocities alone (a spring), whose
+  // stiffness and damping are covered, within a factor of
+  // kCoverageRatio, by stiffer elements along a path between the two
+  // points in the same direction. Such an element's block of the Newton
+  // matrix, [S -S; -S S], then lies below 2 / kCoverageRatio times the
+  // blocks of the path, so removing it whole (coupling and diagonal
+  // share) changes the matrix by that fraction at most. Empty by default.
+  virtual std::vector<std::array<int, 2>> covered_couplings() const { return {}; }
+  static constexpr double kCoverageRatio = 10.0;
 
   // Material points that forces between components can act on
   // (point_kinematics.h): their number (particle nodes, bodies of a tree;

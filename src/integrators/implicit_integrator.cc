@@ -215,10 +215,101 @@ void ImplicitIntegrator::compute_force_jacobians_ahead(double t, const Eigen::Ve
   compute_force_jacobians(t, linearization_);
 }
 
-bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric,
-                                                 double h) {
+const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W, bool symmetric) {
+  CoveredCouplings& c = covered_;
+  if (!c.examined) {
+    c.examined = true;
+    const long n = W.rows();
+    if (!implicit_.drop_covered_couplings || !symmetric || n < kCoveredMinUnknowns) return W;
+    const std::vector<std::array<int, 2>> pairs = system_.covered_couplings();
+    if (pairs.empty()) return W;
+    // The point (its first index) of every index a pair names, and each
+    // point's partners.
+    std::vector<int> point(n, -1);
+    std::vector<std::vector<int>> partners(n);
+    for (const auto& [a, b] : pairs) {
+      if (a < 0 || b < 0 || a + 3 > n || b + 3 > n) return W;
+      for (int d = 0; d < 3; ++d) point[a + d] = a, point[b + d] = b;
+      partners[a].push_back(b);
+      partners[b].push_back(a);
+    }
+    const int* outer = W.outerIndexPtr();
+    const int* inner = W.innerIndexPtr();
+    auto left_out = [&](int r, int col) {
+      const int pr = point[r], pc = point[col];
+      if (pr < 0 || pc < 0 || pr == pc) return false;
+      return std::find(partners[pr].begin(), partners[pr].end(), pc) != partners[pr].end();
+    };
+    c.target.assign(W.nonZeros(), -1);
+    c.matrix.resize(n, n);
+    c.matrix.reserve(W.nonZeros());
+    int next = 0;
+    long below = 0, above = 0;
+    std::vector<int> left;
+    for (long col = 0; col < n; ++col) {
+      c.matrix.startVec(col);
+      for (int k = outer[col]; k < outer[col + 1]; ++k) {
+        if (left_out(inner[k], static_cast<int>(col))) {
+          left.push_back(k);
+          (inner[k] > col ? below : above) += 1;
+        } else {
+          c.matrix.insertBack(inner[k], col) = 0.0;
+          c.target[k] = next++;
+        }
+      }
+    }
+    c.matrix.finalize();
+    if (left.empty() || below != above) return W;  // W must hold both triangles
+    // Each left-out entry (r, col) of block (a, b) adds to (r, a + col - b).
+    const int* m_outer = c.matrix.outerIndexPtr();
+    const int* m_inner = c.matrix.innerIndexPtr();
+    c.left_out.clear();
+    c.twin.clear();
+    for (int k : left) {
+      // k's column: the one whose range holds k.
+      const long col = std::upper_bound(outer, outer + n + 1, k) - outer - 1;
+      const int r = inner[k];
+      const long twin_col = point[r] + (col - point[col]);
+      const int* first = m_inner + m_outer[twin_col];
+      const int* last = m_inner + m_outer[twin_col + 1];
+      const int* at = std::lower_bound(first, last, r);
+      if (at == last || *at != r) return W;  // no diagonal block to move it to
+      c.left_out.push_back(k);
+      c.twin.push_back(static_cast<int>(at - m_inner));
+    }
+  }
+  if (c.left_out.empty()) return W;
+  const double* value = W.valuePtr();
+  double* out = c.matrix.valuePtr();
+  const long entries = W.nonZeros();
+  for (long k = 0; k < entries; ++k) {
+    if (c.target[k] >= 0) out[c.target[k]] = value[k];
+  }
+  for (size_t i = 0; i < c.left_out.size(); ++i) out[c.twin[i]] += value[c.left_out[i]];
+  return c.matrix;
+}
+
+bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& W, bool symmetric, double h,
+                                                 bool preconditioner) {
   IterationMatrix& m = matrices_[active_];
   m.h = h;
+  // A preconditioner (after the slot's first factorization, which chooses
+  // the solver) leaves out the covered couplings where there are any.
+  const SparseMatrix& without =
+      preconditioner && m.solver.solver && symmetric ? factored_matrix(W, symmetric) : W;
+  m.covered_active = &without != &W;
+  if (m.covered_active) {
+    if (!m.covered.solver) {
+      m.covered =
+          make_linear_solver(implicit_.linear_solver, without, symmetric, SmallSystems::kByDensity);
+      const auto start = WallClock::now();
+      m.covered.solver->analyze(without);
+      stats_.factorization_seconds += seconds_since(start);
+      ++stats_.symbolic_analyses;
+    }
+    ++stats_.covered_coupling_factorizations;
+  }
+  const SparseMatrix& matrix = without;
   if (!m.solver.solver) {
     // Small symmetric systems with a constant mass matrix (particles) are
     // banded or grid-like: sparse unless their pattern is dense. Exact
@@ -231,10 +322,11 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
     m.solver.solver->analyze(matrix);
     stats_.factorization_seconds += seconds_since(start);
     ++stats_.symbolic_analyses;
-    stats_.iteration_matrix_nonzeros = matrix.nonZeros();
+    stats_.iteration_matrix_nonzeros = W.nonZeros();
   }
   const auto start = WallClock::now();
-  m.factored = m.solver.solver->factorize(matrix);
+  LinearSolver& solver = m.covered_active ? *m.covered.solver : *m.solver.solver;
+  m.factored = solver.factorize(matrix);
   last_factorization_seconds_ = seconds_since(start);
   stats_.factorization_seconds += last_factorization_seconds_;
   ++stats_.iteration_matrix_factorizations;
@@ -255,7 +347,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& matrix, boo
   factor_reason_ = FactorReason::kLadder;
   krylov_excess_seconds_ = 0.0;
   refactor_due_ = refactor_failed_ = false;
-  if (m.factored) stats_.factor_nonzeros = m.solver.solver->factor_nonzeros();
+  if (m.factored) stats_.factor_nonzeros = solver.factor_nonzeros();
   if (!newton_solve_chosen_) choose_newton_solve(matrix.rows());
   return m.factored;
 }
@@ -322,7 +414,8 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   if (structured_) {
     structured_->solve(rhs, *dx);
   } else {
-    matrices_[active_].solver.solver->solve(rhs, dx);
+    const IterationMatrix& m = matrices_[active_];
+    (m.covered_active ? m.covered.solver : m.solver.solver)->solve(rhs, dx);
   }
   stats_.solve_seconds += seconds_since(start);
   ++stats_.linear_solves;
@@ -1375,7 +1468,7 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
     compute_jacobian_at_iterate(tf, h, x0, x);
     bool symmetric = false;
     const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
-    const bool factored = factor_iteration_matrix(preconditioner, symmetric, h);
+    const bool factored = factor_iteration_matrix(preconditioner, symmetric, h, true);
     last_refactor_seconds_ = seconds_since(start);
     return factored;
   };

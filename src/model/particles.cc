@@ -5,6 +5,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <type_traits>
+#include <unordered_map>
 #include <unsupported/Eigen/AutoDiff>
 #include <utility>
 
@@ -409,6 +410,47 @@ void ParticleSystem::automatic_force_jacobians(SystemData&, double t, const Cons
     }
   });
   J->approximated_terms = 0;
+}
+
+std::vector<std::array<int, 2>> ParticleSystem::covered_couplings() const {
+  const std::vector<Spring>& springs = desc_.springs;
+  const long nodes = node_count();
+  auto key = [nodes](int a, int b) {
+    return static_cast<long long>(std::min(a, b)) * nodes + std::max(a, b);
+  };
+  // The spring on each pair of nodes, or -1 where several share it.
+  std::unordered_map<long long, int> on_pair;
+  std::vector<std::vector<int>> at_node(node_count());
+  for (int s = 0; s < static_cast<int>(springs.size()); ++s) {
+    const auto [it, fresh] = on_pair.emplace(key(springs[s].a, springs[s].b), s);
+    if (!fresh) it->second = -1;
+    at_node[springs[s].a].push_back(s);
+    at_node[springs[s].b].push_back(s);
+  }
+  auto covers = [&](int t, const Spring& s) {
+    const Spring& u = springs[t];
+    return u.k >= System::kCoverageRatio * s.k && u.c >= System::kCoverageRatio * s.c;
+  };
+  std::vector<std::array<int, 2>> pairs;
+  for (int s = 0; s < static_cast<int>(springs.size()); ++s) {
+    const Spring& sp = springs[s];
+    const int da = dof_of_node_[sp.a], db = dof_of_node_[sp.b];
+    if (da < 0 || db < 0 || on_pair.at(key(sp.a, sp.b)) != s) continue;
+    const Eigen::Vector3d& xa = desc_.positions[sp.a];
+    const Eigen::Vector3d& xb = desc_.positions[sp.b];
+    for (int t : at_node[sp.a]) {
+      const int m = springs[t].a == sp.a ? springs[t].b : springs[t].a;
+      if (m == sp.b || !covers(t, sp)) continue;
+      const auto other = on_pair.find(key(m, sp.b));
+      if (other == on_pair.end() || other->second < 0 || !covers(other->second, sp)) continue;
+      const Eigen::Vector3d& xm = desc_.positions[m];
+      if ((xa + xb - 2.0 * xm).norm() <= kCollinearity * (xa - xb).norm()) {
+        pairs.push_back({da, db});
+        break;
+      }
+    }
+  }
+  return pairs;
 }
 
 std::vector<int> ParticleSystem::jacobian_colouring_hint() const {

@@ -920,5 +920,39 @@ TEST(MakeSurfaceMesh, RejectsUnreferencedVerticesAndDegenerateTriangles) {
   }
 }
 
+// A cloth's bend springs are covered (two collinear stretch springs, 100
+// times as stiff and 10 times as damped, span each); its stretch and shear
+// springs are not, nor are springs to a pinned node. A bend spring less
+// than kCoverageRatio times weaker is not covered either.
+TEST(ParticleSystem, CoveredCouplingsAreTheBendSpringsBetweenFreeNodes) {
+  ClothSpec spec;
+  spec.nx = 5;
+  spec.ny = 4;
+  spec.stretch = SpringParameters{1.0e3, 0.5};
+  spec.shear = SpringParameters{1.0e2, 0.1};
+  spec.bend = SpringParameters{10.0, 0.05};
+  const ParticleSystem sys(make_cloth(spec));
+  std::vector<std::array<int, 2>> expected;
+  for (const Spring& s : sys.description().springs) {
+    const auto& la = sys.description().lattice[s.a];
+    const auto& lb = sys.description().lattice[s.b];
+    const bool two_apart = std::abs(la[0] - lb[0]) + std::abs(la[1] - lb[1]) == 2 &&
+                           (la[0] == lb[0] || la[1] == lb[1]);
+    if (two_apart && sys.dof_of_node(s.a) >= 0 && sys.dof_of_node(s.b) >= 0) {
+      expected.push_back({sys.dof_of_node(s.a), sys.dof_of_node(s.b)});
+    }
+  }
+  std::vector<std::array<int, 2>> covered = sys.covered_couplings();
+  std::sort(covered.begin(), covered.end());
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(expected.size(), 18u);  // 22 bend springs, 4 of them to a pinned corner
+  EXPECT_EQ(covered, expected);
+
+  spec.bend = SpringParameters{2.0e2, 0.05};  // 5 times weaker than stretch
+  EXPECT_TRUE(ParticleSystem(make_cloth(spec)).covered_couplings().empty());
+  spec.bend = SpringParameters{10.0, 0.1};  // damped 5 times less than stretch
+  EXPECT_TRUE(ParticleSystem(make_cloth(spec)).covered_couplings().empty());
+}
+
 }  // namespace
 }  // namespace stiffsim

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "stiffsim/integrators/integrator_base.h"
 #include "stiffsim/integrators/jacobian_evaluator.h"
@@ -92,6 +93,14 @@ struct ImplicitSettings {
   // a finishing solve's products cost less than this share of a Jacobian
   // and factorization (see ImplicitIntegrator::finishing_pays). 0: never.
   double finishing_share = 0.3;
+  // The Krylov path's preconditioner is factored, for large symmetric
+  // iteration matrices, without the couplings the system says stiffer
+  // elements cover (System::covered_couplings: a cloth's or rope's bend
+  // springs), which make most of the factor's fill; it then approximates W
+  // within 2 / kCoverageRatio where the sheet is flat. The direct paths
+  // (the chord, full Newton), whose Newton matrix it would be, factor W.
+  // false: W everywhere.
+  bool drop_covered_couplings = true;
   // Full Newton as the last rung before the step is halved (the rescue at
   // fixed steps, the direct ladder's last rung, --newton-solve fresh) goes
   // on past its iteration budget, up to kExtendedFactor times
@@ -309,7 +318,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // Chooses, analyzes (once) and factors the iteration matrix of the current
   // solve, formed for step h; counts factorizations. Returns false if the
   // matrix is singular.
-  bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h);
+  bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h,
+                               bool preconditioner = false);
   // dx = A^-1 rhs with the current factorization.
   void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx);
   bool iteration_matrix_factored() const { return matrices_[active_].factored; }
@@ -442,6 +452,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // The Krylov path's Newton iteration budget, in max_newton_iterations
   // (see newton()).
   static constexpr int kKrylovIterationFactor = 5;
+  // Covered couplings are left out of matrices of at least this size.
+  static constexpr long kCoveredMinUnknowns = 2000;
   // The rescue rung's budget, the last rung's extension near the root, in
   // max_newton_iterations, and what near means: the last update within
   // kChordTestGate of the Newton tolerance and the residual within
@@ -493,9 +505,24 @@ class ImplicitIntegrator : public IntegratorBase {
     LinearSolverChoice solver;
     bool factored = false;
     double h = 0.0;  // the step it was formed for
+    // The factorization without the covered couplings (a preconditioner's:
+    // see factored_matrix()), and whether it is the one in use.
+    LinearSolverChoice covered;
+    bool covered_active = false;
   };
   IterationMatrix matrices_[2];
   int active_ = 0;
+  // W without the covered couplings (ImplicitSettings::drop_covered_couplings):
+  // each left-out block W_ab is added to W_aa, which removes the covering
+  // spring's whole share of W. Returns W itself where nothing is left out.
+  const SparseMatrix& factored_matrix(const SparseMatrix& W, bool symmetric);
+  struct CoveredCouplings {
+    bool examined = false;  // the pattern was built, or found not to apply
+    SparseMatrix matrix;
+    std::vector<int> target;          // per entry of W: its index in matrix, or -1
+    std::vector<int> left_out, twin;  // W's entries left out; where each adds in matrix
+  };
+  CoveredCouplings covered_;
   // Krylov path state: chosen once per run; the cost model compares the
   // GMRES time spent since the last factorization beyond one product per
   // converged solve (what a fresh factorization would have cost in

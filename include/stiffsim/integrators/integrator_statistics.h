@@ -73,6 +73,9 @@ struct IntegratorStatistics {
   // Full Newton solves, the last rung before a halving, that went on past
   // their iteration budget near the root (ImplicitSettings::extend_near_root).
   long last_rung_extensions = 0;
+  // Factorizations of the Krylov path's preconditioner without the covered
+  // couplings (ImplicitSettings::drop_covered_couplings).
+  long covered_coupling_factorizations = 0;
   // Fixed steps without an error estimate: step attempts (a halved step's
   // retries included) whose Newton tolerance the step's own local error
   // set (ImplicitSettings::step_error_tolerance).

@@ -90,6 +90,12 @@ class ParticleSystem : public System {
   // tiling, so nodes of one colour are at L1 distance >= 5 and never share a
   // row; 6 columns per node give 78 colours at every size, the lower bound.
   std::vector<int> jacobian_colouring_hint() const override;
+  // Springs between free nodes a and b for which another node m has springs
+  // (a, m) and (m, b), each at least kCoverageRatio times as stiff and as
+  // damped, and lies on the segment from a to b at rest (within
+  // kCollinearity of its length): a cloth's or rope's bend springs.
+  std::vector<std::array<int, 2>> covered_couplings() const override;
+  static constexpr double kCollinearity = 0.05;
   // Every node is a point attachments can act on: a free node moves with its
   // three dofs, a pinned one with none (it follows its motion, if any).
   int point_elements() const override { return node_count(); }
