@@ -98,8 +98,9 @@ struct ImplicitSettings {
   // elements cover (System::covered_couplings: a cloth's or rope's bend
   // springs), which make most of the factor's fill; it then approximates W
   // within 2 / kCoverageRatio where the sheet is flat. The direct paths
-  // (the chord, full Newton), whose Newton matrix it would be, factor W.
-  // false: W everywhere.
+  // (the chord, full Newton), whose Newton matrix it would be, factor W,
+  // and so does a Krylov rung after a failed chord or fresh start (see
+  // solve_step()). false: W everywhere.
   bool drop_covered_couplings = true;
   // Full Newton as the last rung before the step is halved (the rescue at
   // fixed steps, the direct ladder's last rung, --newton-solve fresh) goes
@@ -523,6 +524,7 @@ class ImplicitIntegrator : public IntegratorBase {
     std::vector<int> left_out, twin;  // W's entries left out; where each adds in matrix
   };
   CoveredCouplings covered_;
+  bool covered_allowed_ = false;  // this Newton solve started on the Krylov path
   // Krylov path state: chosen once per run; the cost model compares the
   // GMRES time spent since the last factorization beyond one product per
   // converged solve (what a fresh factorization would have cost in
