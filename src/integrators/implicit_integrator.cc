@@ -215,12 +215,12 @@ void ImplicitIntegrator::compute_force_jacobians_ahead(double t, const Eigen::Ve
   compute_force_jacobians(t, linearization_);
 }
 
-const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W, bool symmetric) {
+const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W) {
   CoveredCouplings& c = covered_;
   if (!c.examined) {
     c.examined = true;
     const long n = W.rows();
-    if (!implicit_.drop_covered_couplings || !symmetric || n < kCoveredMinUnknowns) return W;
+    if (!implicit_.drop_covered_couplings || n < kCoveredMinUnknowns) return W;
     const std::vector<std::array<int, 2>> pairs = system_.covered_couplings();
     if (pairs.empty()) return W;
     // The point (its first index) of every index a pair names, and each
@@ -245,12 +245,12 @@ const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W, b
     c.matrix.reserve(W.nonZeros());
     int next = 0;
     long below = 0, above = 0;
-    std::vector<int> left;
+    std::vector<std::pair<int, int>> left;  // (entry of W, its column)
     for (long col = 0; col < n; ++col) {
       c.matrix.startVec(col);
       for (int k = outer[col]; k < outer[col + 1]; ++k) {
         if (left_out(inner[k], static_cast<int>(col))) {
-          left.push_back(k);
+          left.push_back({k, static_cast<int>(col)});
           (inner[k] > col ? below : above) += 1;
         } else {
           c.matrix.insertBack(inner[k], col) = 0.0;
@@ -265,9 +265,7 @@ const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W, b
     const int* m_inner = c.matrix.innerIndexPtr();
     c.left_out.clear();
     c.twin.clear();
-    for (int k : left) {
-      // k's column: the one whose range holds k.
-      const long col = std::upper_bound(outer, outer + n + 1, k) - outer - 1;
+    for (const auto& [k, col] : left) {
       const int r = inner[k];
       const long twin_col = point[r] + (col - point[col]);
       const int* first = m_inner + m_outer[twin_col];
@@ -296,7 +294,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& W, bool sym
   // A preconditioner (after the slot's first factorization, which chooses
   // the solver) leaves out the covered couplings where there are any.
   const SparseMatrix& without =
-      preconditioner && m.solver.solver && symmetric ? factored_matrix(W, symmetric) : W;
+      preconditioner && m.solver.solver && symmetric ? factored_matrix(W) : W;
   m.covered_active = &without != &W;
   if (m.covered_active) {
     if (!m.covered.solver) {

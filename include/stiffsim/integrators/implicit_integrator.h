@@ -516,7 +516,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // W without the covered couplings (ImplicitSettings::drop_covered_couplings):
   // each left-out block W_ab is added to W_aa, which removes the covering
   // spring's whole share of W. Returns W itself where nothing is left out.
-  const SparseMatrix& factored_matrix(const SparseMatrix& W, bool symmetric);
+  // W must be symmetric.
+  const SparseMatrix& factored_matrix(const SparseMatrix& W);
   struct CoveredCouplings {
     bool examined = false;  // the pattern was built, or found not to apply
     SparseMatrix matrix;
