@@ -172,8 +172,8 @@ ImplicitIntegrator::Convergence ImplicitIntegrator::check_newton_convergence(
 void ImplicitIntegrator::compute_force_jacobians(double t, const Eigen::VectorXd& x) {
   const auto start = WallClock::now();
   JacobianRequest request;
-  request.definite = implicit_.definite_iteration_matrix;
-  if (estimate_tensions_) {
+  request.definite = implicit_.definite_iteration_matrix && !exact_jacobian_;
+  if (estimate_tensions_ && !exact_jacobian_) {
     request.tension_positions = tension_positions_.data();
     request.tension_carried = tension_carried_;
   }
@@ -324,7 +324,8 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& W, bool sym
   }
   const auto start = WallClock::now();
   LinearSolver& solver = m.covered_active ? *m.covered.solver : *m.solver.solver;
-  m.factored = solver.factorize(matrix);
+  m.factored =
+      factor_if_definite_ ? solver.factorize_if_definite(matrix) : solver.factorize(matrix);
   last_factorization_seconds_ = seconds_since(start);
   stats_.factorization_seconds += last_factorization_seconds_;
   ++stats_.iteration_matrix_factorizations;
@@ -662,6 +663,26 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   double finishing_update = 0.0;
   int stalled_updates = 0;  // Krylov updates in a row cut below kStalledStep
   bool polished = false;    // the tolerance cut for the energy guard (below)
+  // Full Newton factors the exact Hessian of G near the root
+  // (ImplicitSettings::exact_hessian_near_root). The clamped matrix on the
+  // tension estimate converges only linearly there, where the compressed
+  // springs' negative transverse stiffness (which it drops) is what a
+  // folding sheet's curvature is made of: on cloth_stiff.yaml solves ran
+  // 10-25 iterations at updates of 1-3 tolerances, contracting at rates
+  // near 1. A root of a passive step is a minimizer of G, so near it the
+  // exact Hessian is positive definite, a Cholesky LL^T proves it, and
+  // Newton converges quadratically. Where the LL^T fails (the iterate is
+  // not yet in the minimizer's basin), or the search cuts the exact
+  // direction, the solve keeps the clamped matrix. Not on the last rung
+  // before a halving: on cloth.yaml (k = 1e3) under --newton-solve fresh
+  // the exact Hessian took 2.7x the halvings (8 starts each), and on the
+  // rescue rung a successful but misleading exact direction ended an
+  // extension near the root. search_on_g: descent on G is what makes a
+  // definite matrix's direction safe.
+  bool exact_allowed =
+      implicit_.exact_hessian_near_root && full_newton && !structured && !last && search_on_g;
+  bool exact_next = false;  // the next iteration tries the exact Hessian
+  bool exact_used = false;  // this one's matrix is the exact Hessian
   for (int i = 0; i < max_iterations; ++i) {
     if (i >= budget) {
       if (!near_root) return false;
@@ -671,8 +692,12 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     if (structured) {
       if (!factor_structured(*x, h)) return false;
     } else if (full_newton && !finishing_now) {
-      compute_jacobian_at_iterate(tf, h, x0, *x);
-      if (!form_and_factor(h)) return false;
+      exact_used = exact_next && factor_exact_hessian(tf, h, x0, *x);
+      if (exact_next && !exact_used) exact_allowed = false;
+      if (!exact_used) {
+        compute_jacobian_at_iterate(tf, h, x0, *x);
+        if (!form_and_factor(h)) return false;
+      }
     }
     ++stats_.newton_raphson_iterations;
     if (krylov || structured) {
@@ -887,6 +912,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     const double update_size = dx_.segment(offset, n).lpNorm<Eigen::Infinity>();
     near_root = update_size <= kChordTestGate * solve_tolerance_ &&
                 residual_size <= kNearRootResidual * solve_tolerance_;
+    if (exact_used && alpha < 1.0) exact_allowed = false;
+    exact_next = exact_allowed && update_size <= kExactHessianGate * solve_tolerance_;
     if (finishing_now) {
       // A full update of (inexact) Newton on the exact Jacobian within the
       // tolerance leaves an error of about the forcing term times it, plus
@@ -927,7 +954,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (chord_agrees()) {
         residual_converged = true;
         ++stats_.fresh_chord_convergences;
-      } else if (krylov_ && !finishing_failed && finishing_pays()) {
+      } else if (!exact_next && krylov_ && !finishing_failed && finishing_pays()) {
         // The chord's update, within kChordTestGate of the tolerance, says
         // the iterate is near the root, but not near enough: there full
         // Newton's matrix (compressed springs clamped, the damping's
@@ -1439,6 +1466,20 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
   // residual; the line search judges the direction.
   if (!krylov.converged && !krylov.abandoned) ++stats_.krylov_failures;
   return krylov;
+}
+
+bool ImplicitIntegrator::factor_exact_hessian(double tf, double h, const Eigen::VectorXd& x0,
+                                              const Eigen::VectorXd& x) {
+  const IterationMatrix& m = matrices_[active_];
+  if (!m.solver.solver || !m.solver.solver->has_cholesky()) return false;
+  exact_jacobian_ = true;
+  compute_jacobian_at_iterate(tf, h, x0, x);
+  exact_jacobian_ = false;
+  factor_if_definite_ = true;
+  const bool factored = form_and_factor(h);
+  factor_if_definite_ = false;
+  ++(factored ? stats_.exact_hessian_factorizations : stats_.exact_hessian_indefinite);
+  return factored;
 }
 
 bool ImplicitIntegrator::finishing_pays() const {

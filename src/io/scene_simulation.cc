@@ -21,6 +21,7 @@ std::vector<std::string> simulation_keys() {
           "full_newton",
           "reuse",
           "definite_iteration_matrix",
+          "exact_hessian_near_root",
           "error_estimator",
           "newton_solve",
           "newton_tolerance"};
@@ -97,6 +98,8 @@ void read_simulation(const Section& top, SceneConfig* config) {
   implicit.reuse = s.boolean_or("reuse", implicit.reuse);
   implicit.definite_iteration_matrix =
       s.boolean_or("definite_iteration_matrix", implicit.definite_iteration_matrix);
+  implicit.exact_hessian_near_root =
+      s.boolean_or("exact_hessian_near_root", implicit.exact_hessian_near_root);
 }
 
 }  // namespace scene_file

@@ -226,6 +226,16 @@ bool CholmodSolver::factorize(const SparseMatrix& A) {
   return factored_;
 }
 
+bool CholmodSolver::factorize_if_definite(const SparseMatrix& A) {
+  if (!has_cholesky()) return false;
+  struct Restore {
+    bool& allowed;
+    ~Restore() { allowed = true; }
+  } restore{fallback_allowed_};
+  fallback_allowed_ = false;
+  return factorize(A);
+}
+
 bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
   if (mode_ == Mode::kUmfpack) return umfpack_->factorize(A);
 
@@ -261,6 +271,7 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
 
   if (mode_ == Mode::kLLT) {
     if (!pivot_failed) return pivot_ratio_acceptable(cholmod_rcond(factor_, &common_), n_);
+    if (!fallback_allowed_) return false;
     switch_mode(Mode::kLDLT,
                 "matrix not positive definite (" + pivot_position() + ")" + at_factorization());
     const auto start = Clock::now();

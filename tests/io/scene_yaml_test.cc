@@ -168,6 +168,7 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   full_newton: true
   reuse: false
   definite_iteration_matrix: false
+  exact_hessian_near_root: false
   newton_tolerance: accuracy
 )"),
                                          "s.yaml");
@@ -179,7 +180,9 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   EXPECT_TRUE(config.implicit.full_newton);
   EXPECT_FALSE(config.implicit.reuse);
   EXPECT_FALSE(config.implicit.definite_iteration_matrix);
+  EXPECT_FALSE(config.implicit.exact_hessian_near_root);
   EXPECT_FALSE(config.implicit.step_error_tolerance);
+  EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.exact_hessian_near_root);
   // Without the key, fixed steps take their tolerance from their own error.
   EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.step_error_tolerance);
 }

@@ -478,6 +478,49 @@ TEST(CholmodSolverTest, ClothGridPatternPicksSupernodalLltAndSolves) {
   EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
 }
 
+// factorize_if_definite() tries the LL^T alone: an indefinite matrix fails
+// it without a fallback or a word, and the solver keeps its LL^T for the
+// definite matrix a caller then factors instead (an integrator's exact
+// Hessian, then its clamped form). factorize() still falls back, after
+// which there is no LL^T to try. A grid (simplicial) and a cloth
+// (supernodal).
+TEST(CholmodSolverTest, FactorizeIfDefiniteFailsOnIndefiniteWithoutFallingBack) {
+  std::vector<std::string> methods;
+  for (const SparseMatrix& spd : {random_spd(30, 31), cloth_matrix(30, 32)}) {
+    CholmodSolver solver;
+    solver.analyze(spd);
+    const std::string method = solver.method();
+    methods.push_back(method);
+    SCOPED_TRACE(method);
+    ASSERT_TRUE(solver.has_cholesky());
+    // e_k^T A e_k < 0: indefinite, on the same pattern.
+    SparseMatrix indefinite = spd;
+    const int k = static_cast<int>(spd.rows()) / 2;
+    indefinite.coeffRef(k, k) = -indefinite.coeff(k, k);
+    const Eigen::VectorXd b = random_vector(static_cast<int>(spd.rows()), 33);
+    Eigen::VectorXd x(spd.rows());
+    testing::internal::CaptureStderr();
+    EXPECT_FALSE(solver.factorize_if_definite(indefinite));
+    EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+    EXPECT_EQ(solver.method(), method);
+    EXPECT_TRUE(solver.fallback_note().empty());
+    EXPECT_TRUE(solver.has_cholesky());
+    EXPECT_THROW(solver.solve(b, &x), std::logic_error);  // nothing factored
+    ASSERT_TRUE(solver.factorize_if_definite(spd));
+    solver.solve(b, &x);
+    EXPECT_LT(relative_residual(spd, x, b), kResidualTolerance);
+    testing::internal::CaptureStderr();
+    ASSERT_TRUE(solver.factorize(indefinite));
+    testing::internal::GetCapturedStderr();
+    EXPECT_EQ(solver.method(), "cholmod-ldlt");
+    EXPECT_FALSE(solver.has_cholesky());
+    EXPECT_FALSE(solver.factorize_if_definite(spd));  // not attempted
+    EXPECT_EQ(solver.counters().factorizations, 3);
+  }
+  EXPECT_EQ(methods,
+            (std::vector<std::string>{"cholmod-simplicial-llt", "cholmod-supernodal-llt"}));
+}
+
 // A supernodal factor is computed from P A P^T, whose pattern the analysis
 // formed with the slot of A each entry comes from: every factorization
 // takes A's current values, and solves permute in and out. Two matrices of

@@ -108,6 +108,16 @@ struct ImplicitSettings {
   // max_newton_iterations, while its iterate stays near the root (see
   // ImplicitIntegrator::newton). false: the budget ends it.
   bool extend_near_root = true;
+  // Full Newton on a rung that another follows (auto's fresh start; the
+  // early rungs of --full-newton's ladder) factors the exact Hessian of
+  // the incremental potential G (compressed springs' transverse stiffness
+  // kept, each spring's tension as the iterate has it) once its update is
+  // within kExactHessianGate tolerances, wherever a Cholesky LL^T finds that
+  // matrix positive definite. Where it is not, and for the rest of the
+  // solve once it was not or the search cut its direction, the clamped
+  // matrix on the tension estimate (see newton()). false: that matrix
+  // throughout.
+  bool exact_hessian_near_root = true;
   int max_newton_iterations = 10;
   // Newton stops when eta |dx| (or the residual) <= kappa * accuracy
   // (Hairer & Wanner IV.8; see step_error_tolerance for fixed steps); 0.05
@@ -355,6 +365,11 @@ class ImplicitIntegrator : public IntegratorBase {
   // for the inertial term of a configuration-dependent M.
   Eigen::VectorXd inertial_F_, inertial_zdot_, inertial_acceleration_;
   bool iterate_acceleration_ = false;  // inertial_acceleration_ set by a full Newton iterate
+  // The next Jacobian exact (no definite clamp, no tension estimate), and
+  // the next factorization only where the matrix is positive definite
+  // (factor_exact_hessian()).
+  bool exact_jacobian_ = false;
+  bool factor_if_definite_ = false;
 
  private:
   // The refresh ladder: kSkip when the rung would rebuild the matrix that
@@ -471,6 +486,15 @@ class ImplicitIntegrator : public IntegratorBase {
   // The Krylov path's chord test (see newton()) runs after updates at most
   // this many times the Newton tolerance.
   static constexpr double kChordTestGate = 10.0;
+  // Full Newton factors the exact Hessian after updates at most this many
+  // times the Newton tolerance (ImplicitSettings::exact_hessian_near_root).
+  // On cloth_stiff.yaml (8 starts each, alternated) the first update from
+  // the predictor is 35-55 tolerances, the second 2-10: with the exact
+  // Hessian from the second iteration on, 1.8x the time and halvings in 2
+  // runs of 8; from the third, 0.96x the time of a gate of 10, and 0.92x
+  // at 20 (which takes it at the second iteration where the first came
+  // within 20); at 30, 1.12x that of 20.
+  static constexpr double kExactHessianGate = 20.0;
   // Full Newton's finishing iterations (see newton()): GMRES's forcing
   // term, and the contraction an update must show to go on finishing.
   static constexpr double kFinishingForcing = 0.1;
@@ -491,6 +515,11 @@ class ImplicitIntegrator : public IntegratorBase {
   // larger share of a factorization, took 1.07-1.13x the time of 1a682af
   // (before finishing) at 1, and 0.89x of that at 0.3.
   bool finishing_pays() const;
+  // Full Newton's exact Hessian at the iterate x (exact_hessian_near_root),
+  // factored where it is positive definite; false where it is not, or
+  // where the solver in use cannot tell (no Cholesky LL^T).
+  bool factor_exact_hessian(double tf, double h, const Eigen::VectorXd& x0,
+                            const Eigen::VectorXd& x);
   // The finishing direction at the iterate x (rhs = minus the residual):
   // GMRES on the exact Jacobian against the factorization made at an
   // earlier iterate of this solve. False where GMRES missed its forcing.

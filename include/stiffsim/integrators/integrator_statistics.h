@@ -73,6 +73,12 @@ struct IntegratorStatistics {
   // Full Newton solves, the last rung before a halving, that went on past
   // their iteration budget near the root (ImplicitSettings::extend_near_root).
   long last_rung_extensions = 0;
+  // Full Newton near the root (ImplicitSettings::exact_hessian_near_root):
+  // factorizations of the exact Hessian, and attempts that found it
+  // indefinite (each then factors the clamped matrix too). Both count in
+  // iteration_matrix_factorizations.
+  long exact_hessian_factorizations = 0;
+  long exact_hessian_indefinite = 0;
   // Factorizations of the Krylov path's preconditioner without the covered
   // couplings (ImplicitSettings::drop_covered_couplings).
   long covered_coupling_factorizations = 0;

@@ -43,6 +43,9 @@ class CholmodSolver final : public LinearSolver {
   // counters().factorizations counts calls; an analysis redone for a fallback
   // counts in counters().analyses and its time in analysis_seconds.
   bool factorize(const SparseMatrix& A) override;
+  bool has_cholesky() const override { return mode_ == Mode::kLLT; }
+  // A failed attempt counts in counters().factorizations too.
+  bool factorize_if_definite(const SparseMatrix& A) override;
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
   std::string method() const override;
   // Supernodal: L->xsize, the entries stored in the supernodes (including the
@@ -68,6 +71,9 @@ class CholmodSolver final : public LinearSolver {
   // One numeric factorization in the current mode, taking the fallbacks.
   bool factorize_with_fallback(const SparseMatrix& A);
   void switch_mode(Mode next, const std::string& why);
+  // Off during factorize_if_definite(): a pivot that is not positive fails
+  // the factorization instead of switching to LDL^T.
+  bool fallback_allowed_ = true;
   void free_factor_and_workspace();
 
   cholmod_common common_;

@@ -46,6 +46,19 @@ class LinearSolver {
   // size rounding leaves in place of a zero pivot. The solver keeps its own
   // copy of whatever solve() needs, so A may be overwritten after this returns.
   virtual bool factorize(const SparseMatrix& A) = 0;
+  // Whether factorize_if_definite() can tell: the solver factors by a
+  // Cholesky LL^T now, which succeeds exactly on positive definite matrices.
+  virtual bool has_cholesky() const { return false; }
+  // Factorizes A by the solver's LL^T only where A is positive definite:
+  // false where it is not (or the solver has no LL^T in use), with no
+  // fallback to another method, so the next factorize() of a definite matrix
+  // works as before. For callers that have a definite matrix to fall back to
+  // themselves (an exact Hessian that may be indefinite, its clamped form
+  // that is not).
+  virtual bool factorize_if_definite(const SparseMatrix& A) {
+    (void)A;
+    return false;
+  }
   // x = A^-1 b with the last factorization; allocates nothing once x has size
   // n and one solve has been done. x may not alias b. Throws std::logic_error
   // without a successful factorize().
