@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <functional>
 #include <utility>
 
 #include "stiffsim/integrators/implicit_euler.h"
@@ -384,6 +385,51 @@ TEST(KrylovNewton, StalledKrylovSolvesGiveWayToTheRescue) {
   EXPECT_LT(st.newton_raphson_iterations, 50);
 }
 
+// The steps of the 16x16 sheet of k = 1e6 springs at a fixed 1/60 (60 of
+// them, under `implicit`) whose statistic `used` rose, each redone from the
+// same start by full Newton on direct solves alone (NewtonSolve::kFresh) at
+// a tolerance 100 times tighter: where that needs no halving (a halved step
+// is another discretization) the two agree within the Newton tolerances.
+// `direct_check` sees each direct run's statistics.
+struct SameStepsAsDirect {
+  IntegratorStatistics stats;
+  int used = 0, compared = 0;
+  double largest_dv = 0.0;
+};
+SameStepsAsDirect expect_same_steps_as_direct(
+    const ImplicitSettings& implicit, long IntegratorStatistics::*used,
+    const std::function<void(const IntegratorStatistics&)>& direct_check) {
+  const auto sys = cloth(16, 1e6);
+  const double h = 1.0 / 60, accuracy = 1e-3, tolerance = 0.05 * accuracy;
+  VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
+  vie.initialize(sys->initial_state());
+  const int nq = sys->dimensions().nq;
+  SameStepsAsDirect result;
+  for (int n = 1; n <= 60; ++n) {
+    const State start = vie.state();
+    const long before = vie.statistics().*used;
+    vie.integrate_to(n * h);
+    if (vie.statistics().*used == before) continue;
+    ++result.used;
+    ImplicitSettings direct = implicit;
+    direct.newton_solve = NewtonSolve::kFresh;
+    VelocityImplicitEuler one(*sys, fixed(h, false, 0.01 * accuracy), direct);
+    one.initialize(start);
+    one.integrate_to(start.t + h);
+    direct_check(one.statistics());
+    if (one.statistics().substep_failures > 0) continue;
+    ++result.compared;
+    const Eigen::VectorXd dx = vie.state().x - one.state().x;
+    result.largest_dv = std::max(result.largest_dv, dx.tail(nq).lpNorm<Eigen::Infinity>());
+    EXPECT_LT(dx.tail(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance) << "step " << n;
+    EXPECT_LT(dx.head(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance * h) << "step " << n;
+  }
+  EXPECT_LT(result.largest_dv, 2 * tolerance);
+  EXPECT_EQ(vie.statistics().energy_guard_rejections, 0);
+  result.stats = vie.statistics();
+  return result;
+}
+
 // Full Newton on the tension estimate finishes on the exact Jacobian: where
 // the chord test (the factorization just made, solving the new residual)
 // fails after an update near the tolerance, GMRES on the exact Jacobian
@@ -392,60 +438,34 @@ TEST(KrylovNewton, StalledKrylovSolvesGiveWayToTheRescue) {
 // finishing share is set above any cost ratio). Under auto at fixed steps full Newton is the
 // fresh start, chosen on a sheet of k = 1e6 springs folding at 1/60 where
 // the run's timings let auto choose among starts (see
-// AutoExploresTheFreshStartWhereItMayPay). Each step that finishing ended is
-// redone from the same start by full Newton on direct solves alone
-// (NewtonSolve::kFresh, which never finishes with GMRES) at a tolerance 100
-// times tighter; where that needs no halving (a halved step is another
-// discretization) the two agree within the Newton tolerances, as the
-// Krylov path's steps do (expect_krylov_equals_fresh).
+// AutoExploresTheFreshStartWhereItMayPay). Each step that finishing ended
+// agrees with a direct solve 100 times tighter (expect_same_steps_as_direct;
+// NewtonSolve::kFresh never finishes with GMRES), as the Krylov path's steps
+// do (expect_krylov_equals_fresh).
 TEST(KrylovNewton, FullNewtonFinishesOnTheExactJacobianAtTheSameSteps) {
-  const auto sys = cloth(16, 1e6);
-  const double h = 1.0 / 60, accuracy = 1e-3, tolerance = 0.05 * accuracy;
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kAuto;
-  implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
-  implicit.finishing_share = 1e9;         // finishing whatever the timings
+  implicit.step_error_tolerance = false;     // the tolerance stays 0.05 x accuracy
+  implicit.finishing_share = 1e9;            // finishing whatever the timings
   implicit.exact_hessian_near_root = false;  // which finishing would make way for
-  VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
-  vie.initialize(sys->initial_state());
-  const int nq = sys->dimensions().nq;
-  int finished = 0, compared = 0;
-  double largest_dv = 0.0;
-  for (int n = 1; n <= 60; ++n) {
-    const State start = vie.state();
-    const long before = vie.statistics().fresh_finishing_convergences;
-    vie.integrate_to(n * h);
-    if (vie.statistics().fresh_finishing_convergences == before) continue;
-    ++finished;
-    ImplicitSettings direct = implicit;
-    direct.newton_solve = NewtonSolve::kFresh;
-    VelocityImplicitEuler one(*sys, fixed(h, false, 0.01 * accuracy), direct);
-    one.initialize(start);
-    one.integrate_to(start.t + h);
-    EXPECT_EQ(one.statistics().fresh_finishing_solves, 0);
-    if (one.statistics().substep_failures > 0) continue;
-    ++compared;
-    const Eigen::VectorXd dx = vie.state().x - one.state().x;
-    largest_dv = std::max(largest_dv, dx.tail(nq).lpNorm<Eigen::Infinity>());
-    EXPECT_LT(dx.tail(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance) << "step " << n;
-    EXPECT_LT(dx.head(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance * h) << "step " << n;
-  }
+  const SameStepsAsDirect run = expect_same_steps_as_direct(
+      implicit, &IntegratorStatistics::fresh_finishing_convergences,
+      [](const IntegratorStatistics& direct) { EXPECT_EQ(direct.fresh_finishing_solves, 0); });
   // Measured (Release): 56 fresh starts, 9 solves ended by finishing, 5 of
   // them compared, the largest velocity difference 2.5e-5 against the
   // tolerance of 5e-5.
-  const IntegratorStatistics& st = vie.statistics();
+  const IntegratorStatistics& st = run.stats;
   EXPECT_GE(st.fresh_finishing_solves, st.fresh_finishing_convergences);
-  EXPECT_LT(largest_dv, 2 * tolerance);
-  EXPECT_EQ(st.energy_guard_rejections, 0);
   if (st.fresh_first_solves >= 5) {
     EXPECT_GT(st.fresh_finishing_convergences, 0);
-    EXPECT_GE(compared, 1);
+    EXPECT_GE(run.compared, 1);
   }
   // A share of 0 turns finishing off.
   implicit.finishing_share = 0.0;
-  VelocityImplicitEuler off(*sys, fixed(h, false, accuracy), implicit);
+  const auto sys = cloth(16, 1e6);
+  VelocityImplicitEuler off(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
   off.initialize(sys->initial_state());
-  off.integrate_to(60 * h);
+  off.integrate_to(1.0);
   EXPECT_EQ(off.statistics().fresh_finishing_solves, 0);
 }
 
@@ -454,57 +474,33 @@ TEST(KrylovNewton, FullNewtonFinishesOnTheExactJacobianAtTheSameSteps) {
 // at fixed steps full Newton is the fresh start, chosen on a sheet of
 // k = 1e6 springs folding at 1/60 where the run's timings let auto choose
 // among starts (as FullNewtonFinishesOnTheExactJacobianAtTheSameSteps).
-// Each step whose solve factored the exact Hessian is redone from the same
-// start by full Newton on the clamped matrix alone (NewtonSolve::kFresh,
-// whose one rung is the last before a halving, which keeps the clamped
-// matrix) at a tolerance 100 times tighter; where that needs no halving the
-// two agree within the Newton tolerances.
+// Each step whose solve factored the exact Hessian agrees with a direct
+// solve 100 times tighter on the clamped matrix alone
+// (expect_same_steps_as_direct; NewtonSolve::kFresh's one rung is the last
+// before a halving, which keeps the clamped matrix).
 TEST(KrylovNewton, ExactHessianNearTheRootGivesTheSameSteps) {
-  const auto sys = cloth(16, 1e6);
-  const double h = 1.0 / 60, accuracy = 1e-3, tolerance = 0.05 * accuracy;
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kAuto;
   implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
-  VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
-  vie.initialize(sys->initial_state());
-  const int nq = sys->dimensions().nq;
-  int exact = 0, compared = 0;
-  double largest_dv = 0.0;
-  for (int n = 1; n <= 60; ++n) {
-    const State start = vie.state();
-    const long before = vie.statistics().exact_hessian_factorizations;
-    vie.integrate_to(n * h);
-    if (vie.statistics().exact_hessian_factorizations == before) continue;
-    ++exact;
-    ImplicitSettings direct = implicit;
-    direct.newton_solve = NewtonSolve::kFresh;
-    VelocityImplicitEuler one(*sys, fixed(h, false, 0.01 * accuracy), direct);
-    one.initialize(start);
-    one.integrate_to(start.t + h);
-    EXPECT_EQ(one.statistics().exact_hessian_factorizations, 0);
-    EXPECT_EQ(one.statistics().exact_hessian_indefinite, 0);
-    if (one.statistics().substep_failures > 0) continue;
-    ++compared;
-    const Eigen::VectorXd dx = vie.state().x - one.state().x;
-    largest_dv = std::max(largest_dv, dx.tail(nq).lpNorm<Eigen::Infinity>());
-    EXPECT_LT(dx.tail(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance) << "step " << n;
-    EXPECT_LT(dx.head(nq).lpNorm<Eigen::Infinity>(), 2 * tolerance * h) << "step " << n;
-  }
+  const SameStepsAsDirect run =
+      expect_same_steps_as_direct(implicit, &IntegratorStatistics::exact_hessian_factorizations,
+                                  [](const IntegratorStatistics& direct) {
+                                    EXPECT_EQ(direct.exact_hessian_factorizations, 0);
+                                    EXPECT_EQ(direct.exact_hessian_indefinite, 0);
+                                  });
   // Measured (Release): 56 fresh starts, 45 exact factorizations in 29
   // steps, 16 of them compared, the largest velocity difference 1.5e-5
   // against the tolerance of 5e-5.
-  const IntegratorStatistics& st = vie.statistics();
-  EXPECT_LT(largest_dv, 2 * tolerance);
-  EXPECT_EQ(st.energy_guard_rejections, 0);
-  if (st.fresh_first_solves >= 5) {
-    EXPECT_GT(st.exact_hessian_factorizations, 0);
-    EXPECT_GE(compared, 1);
+  if (run.stats.fresh_first_solves >= 5) {
+    EXPECT_GT(run.stats.exact_hessian_factorizations, 0);
+    EXPECT_GE(run.compared, 1);
   }
   // Off, the clamped matrix throughout.
   implicit.exact_hessian_near_root = false;
-  VelocityImplicitEuler off(*sys, fixed(h, false, accuracy), implicit);
+  const auto sys = cloth(16, 1e6);
+  VelocityImplicitEuler off(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
   off.initialize(sys->initial_state());
-  off.integrate_to(60 * h);
+  off.integrate_to(1.0);
   EXPECT_EQ(off.statistics().exact_hessian_factorizations, 0);
   EXPECT_EQ(off.statistics().exact_hessian_indefinite, 0);
 }
