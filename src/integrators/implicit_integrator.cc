@@ -682,13 +682,14 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   bool exact_allowed =
       implicit_.exact_hessian_near_root && full_newton && !structured && !last && search_on_g;
   bool exact_next = false;  // the next iteration tries the exact Hessian
-  bool exact_used = false;  // this one's matrix is the exact Hessian
+  bool exact_used = false;  // this iteration's matrix is the exact Hessian
   for (int i = 0; i < max_iterations; ++i) {
     if (i >= budget) {
       if (!near_root) return false;
       if (i == budget) ++stats_.last_rung_extensions;
     }
     const bool finishing_now = finishing;
+    exact_used = false;
     if (structured) {
       if (!factor_structured(*x, h)) return false;
     } else if (full_newton && !finishing_now) {
