@@ -108,8 +108,8 @@ struct ImplicitSettings {
   // max_newton_iterations, while its iterate stays near the root (see
   // ImplicitIntegrator::newton). false: the budget ends it.
   bool extend_near_root = true;
-  // Full Newton on a rung that another follows (auto's fresh start; the
-  // early rungs of --full-newton's ladder) factors the exact Hessian of
+  // Full Newton on a rung that another follows (auto's fresh start, which
+  // the Krylov rung follows) factors the exact Hessian of
   // the incremental potential G (compressed springs' transverse stiffness
   // kept, each spring's tension as the iterate has it) once its update is
   // within kExactHessianGate tolerances, wherever a Cholesky LL^T finds that
@@ -488,12 +488,14 @@ class ImplicitIntegrator : public IntegratorBase {
   static constexpr double kChordTestGate = 10.0;
   // Full Newton factors the exact Hessian after updates at most this many
   // times the Newton tolerance (ImplicitSettings::exact_hessian_near_root).
-  // On cloth_stiff.yaml (8 starts each, alternated) the first update from
-  // the predictor is 35-55 tolerances, the second 2-10: with the exact
-  // Hessian from the second iteration on, 1.8x the time and halvings in 2
-  // runs of 8; from the third, 0.96x the time of a gate of 10, and 0.92x
-  // at 20 (which takes it at the second iteration where the first came
-  // within 20); at 30, 1.12x that of 20.
+  // On cloth_stiff.yaml (8 starts each, alternated; 8 starts leave about
+  // 8% of noise) the first update from the predictor is 35-55 tolerances,
+  // the second 2-10. With the exact Hessian from the second iteration on:
+  // 1.8x the time and halvings in 2 runs of 8. Against the exact Hessian
+  // from the third iteration on, whatever the update: a gate of 10 took
+  // 1.08x the time, a gate of 20 0.92x (it also takes the second
+  // iteration where the first update came within 20); a gate of 30 took
+  // 1.12x the time of 20.
   static constexpr double kExactHessianGate = 20.0;
   // Full Newton's finishing iterations (see newton()): GMRES's forcing
   // term, and the contraction an update must show to go on finishing.
