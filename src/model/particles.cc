@@ -341,22 +341,38 @@ void ParticleSystem::force_jacobians(SystemData&, double t, const ConstVectorRef
   const Eigen::Map<const Eigen::VectorXd> tension_q(
       request.tension_positions ? request.tension_positions : q.data(), q.size());
   for_each_element_set([&](const auto& set) {
-    constexpr int n = std::decay_t<decltype(set)>::kNodes;
+    using Element = typename std::decay_t<decltype(set)>::Element;
+    constexpr int n = Element::kNodes;
     Eigen::Vector3d x[n], vel[n], x_tension[n], v_unused[n];
-    Eigen::Matrix3d Kb[n * n], Db[n * n];
+    const Eigen::Vector3d* tension = request.tension_positions ? x_tension : nullptr;
     for (size_t k = 0; k < set.elements.size(); ++k) {
       if (!gather(set.elements[k], t, q, v, x, vel)) continue;
       if (request.tension_positions) gather(set.elements[k], t, tension_q, v, x_tension, v_unused);
-      set.elements[k].jacobian_blocks(x, vel, request.tension_positions ? x_tension : nullptr,
-                                      request, Kb, Db, &approximated);
-      const auto& slots = set.slots[k];
-      for (int blk = 0; blk < n * n; ++blk) {
-        const int* bs = &slots[9 * blk];
-        if (bs[0] < 0) continue;  // the block touches a pinned node
-        // Slots are column-major within the block.
-        for (int e = 0; e < 9; ++e) {
-          K[bs[e]] += Kb[blk](e % 3, e / 3);
-          D[bs[e]] += Db[blk](e % 3, e / 3);
+      const auto& slots = set.slots[k];  // column-major within each block
+      if constexpr (is_difference_element<Element>::value) {
+        Eigen::Matrix3d S, C;
+        set.elements[k].jacobian_difference(x, vel, tension, request, &S, &C, &approximated);
+        constexpr double kSign[4] = {-1.0, +1.0, +1.0, -1.0};
+        const double* s = S.data();  // column-major too
+        const double* c = C.data();
+        for (int blk = 0; blk < 4; ++blk) {
+          const int* bs = &slots[9 * blk];
+          if (bs[0] < 0) continue;  // the block touches a pinned node
+          for (int e = 0; e < 9; ++e) {
+            K[bs[e]] += kSign[blk] * s[e];
+            D[bs[e]] += kSign[blk] * c[e];
+          }
+        }
+      } else {
+        Eigen::Matrix3d Kb[n * n], Db[n * n];
+        set.elements[k].jacobian_blocks(x, vel, tension, request, Kb, Db, &approximated);
+        for (int blk = 0; blk < n * n; ++blk) {
+          const int* bs = &slots[9 * blk];
+          if (bs[0] < 0) continue;  // the block touches a pinned node
+          for (int e = 0; e < 9; ++e) {
+            K[bs[e]] += Kb[blk](e % 3, e / 3);
+            D[bs[e]] += Db[blk](e % 3, e / 3);
+          }
         }
       }
     }

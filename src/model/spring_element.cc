@@ -37,15 +37,14 @@ SpringElement::SpringElement(const Spring& spring, std::size_t index, int nodes,
   }
 }
 
-void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
-                                    const Eigen::Vector3d* x_tension,
-                                    const JacobianRequest& request, Eigen::Matrix3d* K,
-                                    Eigen::Matrix3d* D, long* approximated) const {
+void SpringElement::jacobian_difference(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
+                                        const Eigen::Vector3d* x_tension,
+                                        const JacobianRequest& request, Eigen::Matrix3d* S_out,
+                                        Eigen::Matrix3d* C_out, long* approximated) const {
+  Eigen::Matrix3d& S = *S_out;
   const Spring& sp = spring_;
   const SpringFrame<double> f = spring_frame(x[0], x[1]);
-  // S = df_a/dx_b; the blocks are -S, S, S, -S (f_b = -f_a, and f_a depends
-  // on x_b - x_a only).
-  Eigen::Matrix3d S;
+  // S = df_a/dx_b (f_b = -f_a, and f_a depends on x_b - x_a only).
   if (f.collapsed) {
     // Direction undefined. k I is the exact Jacobian of a zero-rest-length
     // spring (force k d), the only kind that can rest collapsed; for L > 0
@@ -79,12 +78,7 @@ void SpringElement::jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vecto
       S += (sp.c / f.l) * (f.u * (P * w).transpose() + w.dot(f.u) * P);
     }
   }
-  const Eigen::Matrix3d C = sp.c * f.u * f.u.transpose();
-  constexpr double kSign[4] = {-1.0, +1.0, +1.0, -1.0};
-  for (int blk = 0; blk < 4; ++blk) {
-    K[blk] = kSign[blk] * S;
-    D[blk] = kSign[blk] * C;
-  }
+  *C_out = sp.c * f.u * f.u.transpose();
 }
 
 }  // namespace stiffsim

@@ -82,9 +82,13 @@ class SpringElement {
   // clamped at 0 and counted in *approximated. With x_tension (the nodes at
   // request.tension_positions) the transverse factor is T / (k l) for the
   // request's tension estimate T (system.h), clamped likewise.
-  void jacobian_blocks(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
-                       const Eigen::Vector3d* x_tension, const JacobianRequest& request,
-                       Eigen::Matrix3d* K, Eigen::Matrix3d* D, long* approximated) const;
+  // The force depends on x_b - x_a and v_b - v_a alone, so its blocks are
+  // -S, S, S, -S for K and -C, C, C, -C for D (force_element.h): S =
+  // df_a/dx_b and C = df_a/dv_b.
+  static constexpr bool kDifference = true;
+  void jacobian_difference(const Eigen::Vector3d* x, const Eigen::Vector3d* v,
+                           const Eigen::Vector3d* x_tension, const JacobianRequest& request,
+                           Eigen::Matrix3d* S, Eigen::Matrix3d* C, long* approximated) const;
 
   // Inline: the energy guard and the incremental potential evaluate every
   // spring once per step or search trial, as often as the forces.
