@@ -64,7 +64,7 @@ struct RunOptions {
   double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
   bool fixed_step = false, error_estimate = false;
   std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve, newton_tolerance;
-  bool full_newton = false, no_reuse = false;
+  bool full_newton = false, no_reuse = false, verify_roots = false;
   std::string output, stats, vtk;
   std::vector<std::string> sets;
   bool quiet = false, summary = false;
@@ -185,6 +185,11 @@ void add_run_options(CLI::App* run, RunOptions* o) {
   run->add_flag("--no-reuse", o->no_reuse,
                 "Fresh Jacobian and factorization at every step attempt (no reuse ladder)")
       ->group(newton);
+  run->add_flag("--verify-roots", o->verify_roots,
+                "Diagnostic: run Newton on from every accepted iterate to the root and report "
+                "the largest distance, in Newton tolerances, in the stats "
+                "(largest_root_distance_ratio); the run is otherwise unchanged but slower")
+      ->group(newton);
 
   const std::string outputs = "Output (files appear only when complete)";
   run->add_option("-o,--output", o->output,
@@ -235,6 +240,7 @@ RunOverrides overrides_from(const RunOptions& o) {
   if (o.newton_tolerance_option->count() > 0) r.newton_tolerance = o.newton_tolerance;
   r.full_newton = o.full_newton;
   r.no_reuse = o.no_reuse;
+  r.verify_roots = o.verify_roots;
   return r;
 }
 

@@ -444,7 +444,10 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
                              &second_derivative_previous_, &x_guess_}) {
     v->resize(nx);
   }
-  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_, &chord_update_}) v->resize(unknowns);
+  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_, &chord_update_, &root_r_, &root_dy_}) {
+    v->resize(unknowns);
+  }
+  root_x_.resize(nx);
   x_prev_.resize(nx);
   x_product_.resize(nx);
   r_product_.resize(unknowns);
@@ -1037,6 +1040,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       continue;
     }
     if (!passes_energy_guard(tf, h, x0, *x)) return false;
+    if (implicit_.verify_roots) check_root(tf, h, x0, *x);
     const double ratio = residual_size / solve_tolerance_;
     double& largest = stats_.largest_final_residual_ratio;
     if (std::isfinite(ratio) && !(ratio <= largest)) largest = ratio;  // NaN: none yet
@@ -1255,7 +1259,9 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     rescue_rung = count;
     rungs[count++] = kFullNewtonTrial;
   }
-  // The time of the rung that converged, and of all the rungs.
+  // The time of the rung that converged, and of all the rungs (without the
+  // root check, a diagnostic).
+  root_check_seconds_ = 0.0;
   double solver_seconds = 0.0;
   const auto began = WallClock::now();
   long krylov_rung_iterations = 0;
@@ -1269,7 +1275,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     const int owner = rungs[k] == kKrylovTrial       ? kKrylovStart
                       : rungs[k] == kFullNewtonTrial ? kFreshStart
                                                      : kChordStart;
-    if (solved) solver_seconds = seconds_since(rung_began);
+    if (solved) solver_seconds = seconds_since(rung_began) - root_check_seconds_;
     if (rungs[k] == kKrylovTrial) {
       krylov_rung_iterations += stats_.newton_raphson_iterations - iterations_before;
     }
@@ -1299,7 +1305,7 @@ bool ImplicitIntegrator::solve_step(double t0, double h, const Eigen::VectorXd& 
     // first step of a sheet at rest, which no rung solves at h) charged to
     // the fresh start kept it from being chosen on the 16x16 sheet of
     // k = 1e8 until its solves on the Krylov start took 35 iterations.
-    const double total = seconds_since(began);
+    const double total = seconds_since(began) - root_check_seconds_;
     auto charge = [this](int which, double seconds, double simulated) {
       StartCost& c = start_costs_[which];
       c.seconds = kStartCostDecay * c.seconds + seconds;
@@ -1467,6 +1473,42 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
   // residual; the line search judges the direction.
   if (!krylov.converged && !krylov.abandoned) ++stats_.krylov_failures;
   return krylov;
+}
+
+void ImplicitIntegrator::check_root(double tf, double h, const Eigen::VectorXd& x0,
+                                    const Eigen::VectorXd& x) {
+  // Only where there is a factorization to precondition GMRES with.
+  if (!structured_ && !iteration_matrix_factored()) return;
+  const auto start = WallClock::now();
+  // The check's residuals, products and solves would count as the run's.
+  const IntegratorStatistics kept = stats_;
+  const double kept_product_seconds = product_seconds_;
+  const int offset = unknowns_offset();
+  const int n = static_cast<int>(root_r_.size());
+  root_x_ = x;
+  bool reached = false;
+  for (int k = 0; k < kRootCheckIterations && !reached; ++k) {
+    residual(tf, h, x0, root_x_, &root_r_);
+    root_r_ = -root_r_;
+    double seconds = 0.0;
+    newton_gmres(tf, h, x0, root_x_, root_r_, kRootCheckForcing, 0.0, &root_dy_, &seconds);
+    if (!root_dy_.allFinite()) break;
+    root_x_.segment(offset, n) += root_dy_;
+    complete_iterate(h, x0, &root_x_);
+    reached = root_dy_.lpNorm<Eigen::Infinity>() <= kRootCheckUpdate * solve_tolerance_;
+  }
+  const double distance =
+      (root_x_ - x).segment(offset, n).lpNorm<Eigen::Infinity>() / solve_tolerance_;
+  stats_ = kept;
+  product_seconds_ = kept_product_seconds;
+  ++stats_.root_checks;
+  if (reached) {
+    double& largest = stats_.largest_root_distance_ratio;
+    if (!(distance <= largest)) largest = distance;  // NaN: none yet
+  } else {
+    ++stats_.root_checks_unfinished;
+  }
+  root_check_seconds_ += seconds_since(start);
 }
 
 bool ImplicitIntegrator::factor_exact_hessian(double tf, double h, const Eigen::VectorXd& x0,

@@ -55,6 +55,7 @@ RunSettings run_settings(const SceneConfig& config, const RunOverrides& o) {
   }
   if (o.full_newton) s.implicit.full_newton = true;
   if (o.no_reuse) s.implicit.reuse = false;
+  if (o.verify_roots) s.implicit.verify_roots = true;
   if (s.integrator.min_step > s.integrator.max_step) {
     char message[160];
     std::snprintf(message, sizeof(message), "step %g is below the scene's simulation.min_step %g",

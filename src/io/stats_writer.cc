@@ -25,7 +25,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 69 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 72 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -71,6 +71,9 @@ json statistics_object(const IntegratorStatistics& s) {
   j["last_rung_extensions"] = s.last_rung_extensions;
   j["exact_hessian_factorizations"] = s.exact_hessian_factorizations;
   j["exact_hessian_indefinite"] = s.exact_hessian_indefinite;
+  j["root_checks"] = s.root_checks;
+  j["root_checks_unfinished"] = s.root_checks_unfinished;
+  j["largest_root_distance_ratio"] = number(s.largest_root_distance_ratio);
   j["covered_coupling_factorizations"] = s.covered_coupling_factorizations;
   j["newton_tolerance_from_step_error"] = s.newton_tolerance_from_step_error;
   j["newton_tolerance_narrowed"] = s.newton_tolerance_narrowed;

@@ -221,6 +221,27 @@ TEST_F(Cli, NewtonToleranceOfFixedStepsIsTheStepsErrorUnlessAsked) {
   EXPECT_EQ(r.exit_code, 2);
 }
 
+TEST_F(Cli, VerifyRootsChecksEverySolveAndChangesNothingElse) {
+  // The 8x8 cloth at 1/60 on the chord path (its choices depend on counts,
+  // not timings): with --verify-roots every solve is checked and the
+  // largest distance reported; the trajectory is the same byte for byte.
+  const std::string common = "run '" + kModels +
+                             "cloth.yaml' --set cloth.nodes=[8,8] --t-final 0.25 --fixed-step "
+                             "--step 0.016666666666666666 --newton-solve chord -q";
+  Result r = run(common + " --stats plain.json --output plain.csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run(common + " --verify-roots --stats checked.json --output checked.csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(read(dir_ / "plain.csv"), read(dir_ / "checked.csv"));
+  const nlohmann::json plain = nlohmann::json::parse(read(dir_ / "plain.json"))["statistics"];
+  const nlohmann::json checked = nlohmann::json::parse(read(dir_ / "checked.json"))["statistics"];
+  EXPECT_EQ(plain["root_checks"].get<long>(), 0);
+  EXPECT_TRUE(plain["largest_root_distance_ratio"].is_null());
+  EXPECT_EQ(checked["root_checks"].get<long>(), checked["newton_solves"].get<long>());
+  EXPECT_GE(checked["largest_root_distance_ratio"].get<double>(), 0.0);
+  EXPECT_EQ(checked["newton_raphson_iterations"], plain["newton_raphson_iterations"]);
+}
+
 TEST_F(Cli, VtkWritesFramesAndASeries) {
   const Result r = run("run '" + kModels +
                        "cloth.yaml' --set cloth.nodes=[4,3] --t-final 0.05 --vtk frames "
@@ -363,6 +384,7 @@ TEST_F(Cli, HelpDescribesEveryOption) {
                              "step-error",
                              "--full-newton",
                              "--no-reuse",
+                             "--verify-roots",
                              "--output",
                              "--sample-period",
                              "--stats",

@@ -79,6 +79,13 @@ struct IntegratorStatistics {
   // iteration_matrix_factorizations.
   long exact_hessian_factorizations = 0;
   long exact_hessian_indefinite = 0;
+  // ImplicitSettings::verify_roots: accepted iterates checked, checks whose
+  // Newton iteration did not reach a root within its budget (no distance
+  // then), and the largest distance from the root found, in tolerances of
+  // the solve (NaN with no check).
+  long root_checks = 0;
+  long root_checks_unfinished = 0;
+  double largest_root_distance_ratio = kNaN;
   // Factorizations of the Krylov path's preconditioner without the covered
   // couplings (ImplicitSettings::drop_covered_couplings).
   long covered_coupling_factorizations = 0;

@@ -24,6 +24,7 @@ struct RunOverrides {
       newton_tolerance;
   bool full_newton = false;  // only ever switches full Newton on, as the flag does
   bool no_reuse = false;     // only ever switches the reuse ladder off
+  bool verify_roots = false;  // only ever switches the root check on
 };
 
 struct RunSettings {
