@@ -239,6 +239,39 @@ TEST(KrylovNewton, ChordTestEndsSolvesNearTheRoot) {
   EXPECT_GT(stats.krylov_chord_convergences, 0);
 }
 
+// The update test: a full update within the tolerance, from a GMRES solve
+// that met its forcing, ends the solve (the iterate it started from was that
+// far from the root, to first order). The steps it ended, of the falling
+// 24x24 cloth at h = 1/60 at three accuracies, against the root nearest
+// each: measured 0.27-2.5 times the tolerance (4 steps of 45, Release),
+// within the bound the other tests keep (RateTestNeedsTheChordsAgreement).
+TEST(KrylovNewton, UpdateTestEndsSolvesNearTheRoot) {
+  const auto sys = cloth(24, 1e3);
+  const double h = 1.0 / 60;
+  int ended = 0;
+  for (const double accuracy : {1e-3, 3e-3, 1e-2}) {
+    const double tolerance = 0.05 * accuracy;
+    ImplicitSettings implicit;
+    implicit.newton_solve = NewtonSolve::kKrylov;
+    implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
+    VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
+    vie.initialize(sys->initial_state());
+    for (int step = 0; step < 15; ++step) {
+      const State start = vie.state();
+      const long before = vie.statistics().krylov_update_convergences;
+      vie.integrate_to(start.t + h);
+      if (vie.statistics().krylov_update_convergences == before) continue;
+      ++ended;
+      RootNear root(*sys, h);
+      const Eigen::VectorXd x = root.solve(start, h, vie.state().x);
+      EXPECT_LE((vie.state().x - x).lpNorm<Eigen::Infinity>(), 20.0 * tolerance)
+          << "accuracy " << accuracy << ", step " << step;
+    }
+    EXPECT_EQ(vie.statistics().substep_failures, 0);
+  }
+  EXPECT_GT(ended, 0);
+}
+
 // A rope at a step so small that h^2 K is a ten-thousandth of M: the first
 // factorization stays an exact preconditioner, every GMRES solve takes one
 // product, and the cost model (which charges only the products beyond the

@@ -107,6 +107,9 @@ struct IntegratorStatistics {
   // the tolerance. The solve then ends, unless a widened tolerance is
   // narrowed (newton_tolerance_narrowed) or the energy guard rejects it.
   long krylov_chord_convergences = 0;
+  // Krylov-path iterates accepted by the update test: a full update, from a
+  // GMRES solve that met its forcing, within the tolerance.
+  long krylov_update_convergences = 0;
   // The same test in full Newton (the fresh factorization at the previous
   // iterate gives the next update): its solves, and the iterates it
   // accepted.
