@@ -10,6 +10,8 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/io/atomic_file.h"
+#include "stiffsim/linalg/blas_kernels.h"
+#include "stiffsim/linalg/blas_threads.h"
 
 namespace stiffsim {
 namespace {
@@ -148,6 +150,9 @@ std::string stats_json(const RunSummary& s) {
                       {"solve", number(s.statistics.solve_seconds)},
                       {"derivative", number(s.statistics.derivative_seconds)}};
   j["statistics"] = statistics_object(s.statistics);
+  // The process's BLAS as the sparse solvers left it (linalg/blas_threads.h,
+  // linalg/blas_kernels.h): what every factorization time above ran on.
+  j["blas"] = {{"threads", current_blas_threads()}, {"kernels", blas_kernels_note()}};
   j["skipped"] = s.report.skipped;
   j["energy"] = {{"start", number(s.energy_start)}, {"end", number(s.energy_end)}};
   j["samples"] = s.samples;

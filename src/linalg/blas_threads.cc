@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <mutex>
 
+#include "stiffsim/linalg/blas_kernels.h"
+
 // Weak: resolved only when the BLAS behind libblas.so.3 is OpenBLAS, so the
 // reference BLAS still links and runs.
 extern "C" void openblas_set_num_threads(int) __attribute__((weak));
@@ -81,6 +83,7 @@ void apply_openmp(int threads) {
 }  // namespace
 
 bool set_blas_threads(int threads) {
+  choose_blas_kernels();
   threads = std::max(threads, 1);
   bool told;
   {
@@ -96,6 +99,7 @@ bool set_blas_threads(int threads) {
 void apply_blas_threads() {
   int threads = process_threads.load();
   if (threads == 0) {
+    choose_blas_kernels();
     const std::lock_guard<std::mutex> lock(process_mutex);
     if (process_threads.load() == 0) {
       apply_openblas(kDefaultThreads);

@@ -1,13 +1,16 @@
 #include "stiffsim/linalg/blas_threads.h"
 
 #include <gtest/gtest.h>
+#include <strings.h>
 
 #include <Eigen/SparseCore>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <thread>
 #include <vector>
 
+#include "stiffsim/linalg/blas_kernels.h"
 #include "stiffsim/linalg/cholmod_solver.h"
 #include "stiffsim/linalg/umfpack_solver.h"
 
@@ -180,6 +183,77 @@ TEST(BlasThreadsTest, ASolverInAnotherThreadFollowsTheProcessWideCount) {
   EXPECT_GE(levels_before, 1) << "a new thread starts from the runtime's defaults";
   EXPECT_EQ(levels_after, 0);
   EXPECT_EQ(team_after, 1);
+}
+
+// OpenBLAS's kernels (linalg/blas_kernels.h): on a CPU with AVX2, the first
+// sparse solver of a process leaves OpenBLAS on kernels of at least that
+// width, never its SSE3 fallback for a CPU it does not know (Prescott), and
+// a factorization on them solves as before; a user's OPENBLAS_CORETYPE is
+// kept. Each test runs in a fresh process (the threadsafe death-test style
+// re-executes the binary with this environment), where OpenBLAS chose its
+// kernels as it loaded.
+bool have_openblas() {
+  CholmodSolver solver;  // the first solver makes the choice
+  return !blas_kernels_in_use().empty();
+}
+
+bool cpu_has_avx2() {
+#if defined(__x86_64__)
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
+
+TEST(BlasKernelsTest, FirstSolverLeavesKernelsAsWideAsTheCpuAndSolves) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  unsetenv("OPENBLAS_CORETYPE");
+  EXPECT_EXIT(
+      {
+        int failures = 0;
+        auto check = [&failures](bool ok, const std::string& what) {
+          if (ok) return;
+          std::fprintf(stderr, "failed: %s\n", what.c_str());
+          ++failures;
+        };
+        if (!have_openblas()) std::exit(0);
+        const std::string kernels = blas_kernels_in_use();
+        const std::string note = blas_kernels_note();
+        check(note.rfind("OpenBLAS " + kernels, 0) == 0, "the note names the kernels: " + note);
+        if (cpu_has_avx2()) {
+          check(strcasecmp(kernels.c_str(), "Prescott") != 0, "not the SSE3 fallback: " + note);
+        }
+        check(std::getenv("OPENBLAS_CORETYPE") == nullptr, "the environment is restored");
+        const Eigen::SparseMatrix<double> A = cloth_like_matrix();
+        CholmodSolver solver;
+        solver.analyze(A);
+        check(solver.method() == "cholmod-supernodal-llt", "supernodal: " + solver.method());
+        check(solver.factorize(A), "factorized");
+        const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(A.rows(), -1.0, 2.0);
+        Eigen::VectorXd x(A.rows());
+        solver.solve(b, &x);
+        check((A * x - b).norm() <= 1e-12 * b.norm(), "solved to round-off");
+        std::exit(failures);
+      },
+      testing::ExitedWithCode(0), "");
+}
+
+TEST(BlasKernelsTest, UsersCoretypeIsKept) {
+  if (!cpu_has_avx2()) GTEST_SKIP() << "Haswell's kernels need AVX2";
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  setenv("OPENBLAS_CORETYPE", "Haswell", 1);
+  EXPECT_EXIT(
+      {
+        if (!have_openblas()) std::exit(0);
+        const bool kept = blas_kernels_in_use() == "Haswell" &&
+                          blas_kernels_note() == "OpenBLAS Haswell" &&
+                          std::getenv("OPENBLAS_CORETYPE") != nullptr;
+        if (!kept) std::fprintf(stderr, "failed: %s\n", blas_kernels_note().c_str());
+        std::exit(kept ? 0 : 1);
+      },
+      testing::ExitedWithCode(0), "");
+  unsetenv("OPENBLAS_CORETYPE");
 }
 
 }  // namespace
