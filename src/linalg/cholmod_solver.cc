@@ -392,11 +392,6 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   const int nsuper = static_cast<int>(factor_->nsuper);
   auto& t = single_.gathered;
   if (t.size() < static_cast<Eigen::Index>(factor_->maxesize)) t.resize(factor_->maxesize);
-  // CHOLMOD's supernodal layout: supernode s holds columns super[s] to
-  // super[s + 1] - 1 of L as one dense column-major block of nrow rows at
-  // px[s], its diagonal block first; the rows below are listed at
-  // s[pi[s] + ncol ...]. The two sweeps are CHOLMOD's own (dense triangle,
-  // then a product scattered to or gathered from the rows below), in float.
   using Block = Eigen::Map<const Eigen::MatrixXf>;
   // L y = P b, supernode by supernode: the diagonal block's triangle, then
   // the rows below it.
