@@ -408,19 +408,13 @@ void ImplicitIntegrator::choose_newton_solve(long unknowns) {
   }
 }
 
-void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx,
-                                                bool preconditioner) {
+void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
   const auto start = WallClock::now();
   if (structured_) {
     structured_->solve(rhs, *dx);
   } else {
     const IterationMatrix& m = matrices_[active_];
-    LinearSolver& solver = *(m.covered_active ? m.covered.solver : m.solver.solver);
-    if (preconditioner) {
-      solver.solve_preconditioner(rhs, dx);
-    } else {
-      solver.solve(rhs, dx);
-    }
+    (m.covered_active ? m.covered.solver : m.solver.solver)->solve(rhs, dx);
   }
   stats_.solve_seconds += seconds_since(start);
   ++stats_.linear_solves;
@@ -1477,7 +1471,7 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
     *Ap = (r_product_ + rhs) / eps;
   };
   auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
-    solve_iteration_matrix(r, z, true);
+    solve_iteration_matrix(r, z);
   };
   const auto start = WallClock::now();
   // Abandoned where the products still needed, at the rate the solve has

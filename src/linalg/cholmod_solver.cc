@@ -255,7 +255,6 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
     header = wrap(A, factor_->is_super ? 1 : -1);
   }
   cholmod_factorize(&header, factor_, &common_);
-  single_.current = false;
   if (common_.status < CHOLMOD_OK) {
     throw std::runtime_error(cholmod_error("cholmod_factorize", common_.status));
   }
@@ -364,64 +363,6 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
       std::copy(solution, solution + n_, x->data());
     }
   }
-  ++counters_.solves;
-  counters_.solve_seconds += seconds_since(start);
-}
-
-void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
-  if (!factored_ || mode_ != Mode::kLLT || !factor_->is_super || b.size() != n_) {
-    solve(b, x);
-    return;
-  }
-  const auto start = Clock::now();
-  const double* values = static_cast<const double*>(factor_->x);
-  if (!single_.current) {
-    single_.values.resize(factor_->xsize);
-    for (size_t k = 0; k < factor_->xsize; ++k) single_.values[k] = static_cast<float>(values[k]);
-    single_.current = true;
-  }
-  const int* perm = static_cast<const int*>(factor_->Perm);
-  if (prepermuted_.active) perm = prepermuted_.perm.data();
-  auto& y = single_.y;
-  if (y.size() != n_) y.resize(n_);
-  for (int k = 0; k < n_; ++k) y[k] = static_cast<float>(b[perm[k]]);
-  const int* super = static_cast<const int*>(factor_->super);
-  const int* pi = static_cast<const int*>(factor_->pi);
-  const int* px = static_cast<const int*>(factor_->px);
-  const int* rows = static_cast<const int*>(factor_->s);
-  const int nsuper = static_cast<int>(factor_->nsuper);
-  auto& t = single_.gathered;
-  if (t.size() < static_cast<Eigen::Index>(factor_->maxesize)) t.resize(factor_->maxesize);
-  using Block = Eigen::Map<const Eigen::MatrixXf>;
-  // L y = P b, supernode by supernode: the diagonal block's triangle, then
-  // the rows below it.
-  for (int s = 0; s < nsuper; ++s) {
-    const int k1 = super[s], ncol = super[s + 1] - k1;
-    const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-    const Block L(single_.values.data() + px[s], nrow, ncol);
-    auto head = y.segment(k1, ncol);
-    L.topRows(ncol).triangularView<Eigen::Lower>().solveInPlace(head);
-    if (nbelow > 0) {
-      t.head(nbelow).noalias() = L.bottomRows(nbelow) * head;
-      const int* below = rows + pi[s] + ncol;
-      for (int i = 0; i < nbelow; ++i) y[below[i]] -= t[i];
-    }
-  }
-  // L^T z = y, in reverse.
-  for (int s = nsuper - 1; s >= 0; --s) {
-    const int k1 = super[s], ncol = super[s + 1] - k1;
-    const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-    const Block L(single_.values.data() + px[s], nrow, ncol);
-    auto head = y.segment(k1, ncol);
-    if (nbelow > 0) {
-      const int* below = rows + pi[s] + ncol;
-      for (int i = 0; i < nbelow; ++i) t[i] = y[below[i]];
-      head.noalias() -= L.bottomRows(nbelow).transpose() * t.head(nbelow);
-    }
-    L.topRows(ncol).triangularView<Eigen::Lower>().transpose().solveInPlace(head);
-  }
-  if (x->size() != n_) x->resize(n_);
-  for (int k = 0; k < n_; ++k) (*x)[perm[k]] = y[k];
   ++counters_.solves;
   counters_.solve_seconds += seconds_since(start);
 }

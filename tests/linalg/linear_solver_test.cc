@@ -558,48 +558,6 @@ TEST(CholmodSolverTest, SupernodalFactorsThePermutedMatrixFormedAtTheAnalysis) {
 
 // The LDL^T fallback re-analyzes as simplicial whichever LL^T was chosen; a
 // banded indefinite matrix takes it from simplicial LL^T.
-// A supernodal factor applied as a preconditioner runs in single
-// precision: its solve is the double solve to float rounding, no closer,
-// and follows each new factorization. Cholesky in float leaves a backward
-// error of a modest multiple of its epsilon (6e-8) times |A|, so the
-// relative residual stays near 1e-6; the double solve's is near 1e-15.
-// Where the factor is simplicial (a rope), there is no single-precision
-// copy: the preconditioner solve is the solve itself.
-TEST(CholmodSolverTest, SupernodalPreconditionerSolvesInSinglePrecision) {
-  const SparseMatrix A = cloth_matrix(40, 72);  // 4,800 DOFs
-  SparseMatrix B = A;
-  for (int k = 0; k < B.nonZeros(); ++k) B.valuePtr()[k] *= 1.0 + 0.1 * std::cos(k);
-  B = SparseMatrix(0.5 * (B + SparseMatrix(B.transpose())));
-  B.diagonal().array() += 10.0;
-  CholmodSolver solver;
-  solver.analyze(A);
-  ASSERT_EQ(solver.method(), "cholmod-supernodal-llt");
-  const Eigen::VectorXd b = random_vector(A.rows(), 73);
-  Eigen::VectorXd x(A.rows()), x_single(A.rows());
-  const SparseMatrix& C = B;
-  for (const SparseMatrix* M : {&A, &C, &A}) {
-    ASSERT_TRUE(solver.factorize(*M));
-    solver.solve(b, &x);
-    solver.solve_preconditioner(b, &x_single);
-    const double residual = relative_residual(*M, x_single, b);
-    EXPECT_LT(residual, 1e-5);
-    EXPECT_GT(residual, 1e3 * relative_residual(*M, x, b));  // float, not double
-    EXPECT_LT((x_single - x).norm() / x.norm(), 1e-4);
-  }
-  EXPECT_EQ(solver.counters().solves, 6);
-
-  const SparseMatrix R = rope_matrix(400, 74);
-  CholmodSolver simplicial;
-  simplicial.analyze(R);
-  ASSERT_EQ(simplicial.method(), "cholmod-simplicial-llt");
-  ASSERT_TRUE(simplicial.factorize(R));
-  const Eigen::VectorXd c = random_vector(R.rows(), 75);
-  Eigen::VectorXd y(R.rows()), y_preconditioner(R.rows());
-  simplicial.solve(c, &y);
-  simplicial.solve_preconditioner(c, &y_preconditioner);
-  EXPECT_EQ(y_preconditioner, y);
-}
-
 TEST(CholmodSolverTest, SimplicialLltFallsBackToLdltOnIndefiniteBandedMatrix) {
   SparseMatrix A = rope_matrix(200, 64);
   for (int i = 0; i < 3; ++i) A.coeffRef(3 * 100 + i, 3 * 100 + i) = -5.0;

@@ -342,11 +342,8 @@ class ImplicitIntegrator : public IntegratorBase {
   // matrix is singular.
   bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h,
                                bool preconditioner = false);
-  // dx = A^-1 rhs with the current factorization; as a preconditioner
-  // (GMRES), in the solver's single precision where it has one
-  // (LinearSolver::solve_preconditioner).
-  void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx,
-                              bool preconditioner = false);
+  // dx = A^-1 rhs with the current factorization.
+  void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx);
   bool iteration_matrix_factored() const { return matrices_[active_].factored; }
   void invalidate_factorization() {
     for (auto& m : matrices_) m.factored = false;

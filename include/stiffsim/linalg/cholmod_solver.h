@@ -47,7 +47,6 @@ class CholmodSolver final : public LinearSolver {
   // A failed attempt counts in counters().factorizations too.
   bool factorize_if_definite(const SparseMatrix& A) override;
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
-  void solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
   std::string method() const override;
   // Supernodal: L->xsize, the entries stored in the supernodes (including the
   // explicit zeros that make supernodes dense). Simplicial LL^T and LDL^T: the
@@ -102,13 +101,6 @@ class CholmodSolver final : public LinearSolver {
     std::vector<double> values;
     Eigen::VectorXd rhs;
   } prepermuted_;
-  // The supernodal factor in single precision (solve_preconditioner), made
-  // from the factor at the first such solve after each factorization.
-  struct Single {
-    bool current = false;
-    std::vector<float> values;
-    Eigen::VectorXf y, gathered;
-  } single_;
 };
 
 }  // namespace stiffsim

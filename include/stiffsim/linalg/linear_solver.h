@@ -63,12 +63,6 @@ class LinearSolver {
   // n and one solve has been done. x may not alias b. Throws std::logic_error
   // without a successful factorize().
   virtual void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) = 0;
-  // x ~ A^-1 b for a preconditioner: the same factorization applied in
-  // single precision where the solver holds one (a supernodal LL^T), which
-  // halves the bytes a bandwidth-bound solve reads; solve() otherwise. The
-  // result is a fixed function of b but not exactly linear in it: for
-  // callers that tolerate that (flexible GMRES, which keeps P^-1 v).
-  virtual void solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) { solve(b, x); }
 
   // What is in use now ("cholmod-supernodal-llt", "cholmod-simplicial-llt",
   // "cholmod-ldlt", "umfpack", "dense-lu", ...); a fallback changes it, and a
