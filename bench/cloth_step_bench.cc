@@ -50,16 +50,31 @@ void BM_Factorize(benchmark::State& state) {
   state.SetLabel(choice.solver->method());
 }
 
-void BM_Solve(benchmark::State& state) {
+// One solve with a factorization of W: in double (BM_Solve) or as GMRES's
+// preconditioner (BM_SolvePreconditioner: single precision where the
+// factor is supernodal), with the latter's relative distance from the
+// double solve.
+void solve_with_factor(benchmark::State& state, bool preconditioner) {
   const ParticleSystem sys = make_scene(state.range(0));
   const SparseMatrix W = iteration_matrix(sys);
   auto choice = make_linear_solver(LinearSolverKind::kAuto, W, true);
   choice.solver->analyze(W);
   choice.solver->factorize(W);
-  Eigen::VectorXd b = Eigen::VectorXd::Ones(W.rows()), x(W.rows());
-  for (auto _ : state) choice.solver->solve(b, &x);
+  Eigen::VectorXd b = Eigen::VectorXd::Ones(W.rows()), x(W.rows()), x_double(W.rows());
+  choice.solver->solve(b, &x_double);
+  for (auto _ : state) {
+    if (preconditioner) {
+      choice.solver->solve_preconditioner(b, &x);
+    } else {
+      choice.solver->solve(b, &x);
+    }
+  }
   state.counters["dofs"] = W.rows();
+  if (preconditioner) state.counters["rel_diff"] = (x - x_double).norm() / x_double.norm();
 }
+
+void BM_Solve(benchmark::State& state) { solve_with_factor(state, false); }
+void BM_SolvePreconditioner(benchmark::State& state) { solve_with_factor(state, true); }
 
 // One evaluation of the force Jacobians K and D (the iteration matrix's
 // definite request, as full Newton asks for it) on a cloth lying in its rest
@@ -112,6 +127,7 @@ void BM_VieStep(benchmark::State& state) {
 
 BENCHMARK(BM_Factorize)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Solve)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_SolvePreconditioner)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ForceJacobians)->Arg(32)->Arg(100)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_VieStep)->Args({32, 0})->Args({32, 1})->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VieStep)->Args({100, 0})->Iterations(12)->Unit(benchmark::kMillisecond);

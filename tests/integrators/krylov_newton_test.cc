@@ -55,7 +55,7 @@ State moving_state(Method method, const System& sys, double h, int steps) {
   return integrator->state();
 }
 
-void expect_krylov_equals_fresh(Method method, const System& sys, double h) {
+IntegratorStatistics expect_krylov_equals_fresh(Method method, const System& sys, double h) {
   // Accuracy 1e-6: Newton tolerance 5e-8 on the weighted state change. Each
   // solve stops with its estimated error below that tolerance, so the two
   // answers differ by at most twice it; a factor 2 more allows for the
@@ -74,16 +74,23 @@ void expect_krylov_equals_fresh(Method method, const System& sys, double h) {
   // The step itself is far larger than the tolerance: the comparison means
   // something.
   EXPECT_GT((fresh.x - start.x).lpNorm<Eigen::Infinity>(), 1e3 * tolerance);
+  return krylov.stats;
 }
 
 TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(16, 1e3);  // 768 DOFs: CHOLMOD
-  expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 60);
+  const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 60);
+  // Supernodal: GMRES applied the factor in single precision.
+  EXPECT_GT(st.single_precision_solves, 0);
+  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations);
+  EXPECT_EQ(st.single_precision_declined, 0);
 }
 
 TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(12, 1e6);
-  expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
+  const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
+  EXPECT_GT(st.single_precision_solves, 0);
+  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations);
 }
 
 TEST(KrylovNewton, SmallSystemsWithAConstantMassMatrixGoSparse) {

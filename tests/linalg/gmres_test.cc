@@ -71,5 +71,34 @@ TEST(Gmres, GiveUpEndsTheSolveEarly) {
   EXPECT_EQ(ws.basis.data(), storage);
 }
 
+// A preconditioner that is a fixed function of its argument but not linear
+// in it (the exact inverse rounded to single precision, as a float copy of
+// a factor gives): GMRES keeps P^-1 v for each basis vector, so the
+// residual it reports is still that of its answer, and the solve converges
+// near the exact preconditioner's one product.
+TEST(Gmres, ReportsTheTrueResidualUnderASinglePrecisionPreconditioner) {
+  const int n = 30;
+  const Diagonal A{Eigen::VectorXd::LinSpaced(n, 1.0, 1e4)};
+  const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(n, -1.0, 2.0);
+  auto single_inverse = [&](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+    *z = (r.cast<float>().array() / A.d.cast<float>().array()).cast<double>().matrix();
+  };
+  GmresWorkspace ws;
+  Eigen::VectorXd x;
+  const GmresResult result = gmres(A, single_inverse, b, Eigen::VectorXd(), 1e-12, n, &ws, &x);
+  EXPECT_TRUE(result.converged);
+  EXPECT_LE(result.iterations, 3);
+  Eigen::VectorXd Ax;
+  A(x, &Ax);
+  const double relative = (b - Ax).norm() / b.norm();
+  EXPECT_LE(relative, 1e-12 * (1 + 1e-3));
+  EXPECT_NEAR(result.relative_residual, relative, 1e-14);
+  // One product alone leaves the float's rounding, not the tolerance.
+  const GmresResult one = gmres(A, single_inverse, b, Eigen::VectorXd(), 1e-12, 1, &ws, &x);
+  EXPECT_FALSE(one.converged);
+  EXPECT_GT(one.relative_residual, 1e-10);
+  EXPECT_LT(one.relative_residual, 1e-6);
+}
+
 }  // namespace
 }  // namespace stiffsim

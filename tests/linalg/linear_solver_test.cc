@@ -19,6 +19,10 @@
 #include "stiffsim/linalg/dense_solvers.h"
 #include "stiffsim/linalg/umfpack_solver.h"
 
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
+
 // Counting allocations: glibc lets an executable interpose malloc and reach
 // the real allocator through __libc_malloc, which catches allocations made by
 // Eigen, CHOLMOD and UMFPACK alike (operator new ends in malloc too).
@@ -554,6 +558,116 @@ TEST(CholmodSolverTest, SupernodalFactorsThePermutedMatrixFormedAtTheAnalysis) {
   EXPECT_EQ(solver.method(), "cholmod-ldlt");
   solver.solve(b, &x);
   EXPECT_LT(relative_residual(negative, x, b), kResidualTolerance);
+}
+
+// A supernodal factor applied as a preconditioner runs in single
+// precision: its solve is the double solve to float rounding, no closer,
+// and follows each new factorization. Cholesky in float leaves a backward
+// error of a modest multiple of its epsilon (6e-8) times |A|, so the
+// relative residual stays near 1e-6; the double solve's is near 1e-15.
+// Where the factor is simplicial (a rope), there is no single-precision
+// copy: the preconditioner solve is the solve itself.
+TEST(CholmodSolverTest, SupernodalPreconditionerSolvesInSinglePrecision) {
+  const SparseMatrix A = cloth_matrix(40, 72);  // 4,800 DOFs
+  SparseMatrix B = A;
+  for (int k = 0; k < B.nonZeros(); ++k) B.valuePtr()[k] *= 1.0 + 0.1 * std::cos(k);
+  B = SparseMatrix(0.5 * (B + SparseMatrix(B.transpose())));
+  B.diagonal().array() += 10.0;
+  CholmodSolver solver;
+  solver.analyze(A);
+  ASSERT_EQ(solver.method(), "cholmod-supernodal-llt");
+  const Eigen::VectorXd b = random_vector(A.rows(), 73);
+  Eigen::VectorXd x(A.rows()), x_single(A.rows());
+  const SparseMatrix& C = B;
+  for (const SparseMatrix* M : {&A, &C, &A}) {
+    ASSERT_TRUE(solver.factorize(*M));
+    solver.solve(b, &x);
+    solver.solve_preconditioner(b, &x_single);
+    const double residual = relative_residual(*M, x_single, b);
+    EXPECT_LT(residual, 1e-5);
+    EXPECT_GT(residual, 1e3 * relative_residual(*M, x, b));  // float, not double
+    EXPECT_LT((x_single - x).norm() / x.norm(), 1e-4);
+  }
+  EXPECT_EQ(solver.counters().solves, 6);
+  EXPECT_EQ(solver.counters().single_precision_solves, 3);
+  EXPECT_EQ(solver.counters().single_precision_declined, 0);
+
+  const SparseMatrix R = rope_matrix(400, 74);
+  CholmodSolver simplicial;
+  simplicial.analyze(R);
+  ASSERT_EQ(simplicial.method(), "cholmod-simplicial-llt");
+  ASSERT_TRUE(simplicial.factorize(R));
+  const Eigen::VectorXd c = random_vector(R.rows(), 75);
+  Eigen::VectorXd y(R.rows()), y_preconditioner(R.rows());
+  simplicial.solve(c, &y);
+  simplicial.solve_preconditioner(c, &y_preconditioner);
+  EXPECT_EQ(y_preconditioner, y);
+  EXPECT_EQ(simplicial.counters().single_precision_solves, 0);
+}
+
+// The first preconditioner solve after a factorization measures the float
+// solve's residual against the factored matrix. Where W's condition times
+// float's epsilon is not small (here the stiffness a million times the
+// mass term, condition ~1e9), the float answer is far from A^-1 b and that
+// factorization's preconditioner solves run in double; the next
+// well-conditioned factorization returns to single precision.
+TEST(CholmodSolverTest, IllConditionedFactorPreconditionsInDouble) {
+  const SparseMatrix A = cloth_matrix(40, 76);
+  SparseMatrix identity(A.rows(), A.cols());
+  identity.setIdentity();
+  SparseMatrix stiff = 1e6 * (A - identity) + identity;  // the same pattern
+  stiff.makeCompressed();
+  ASSERT_EQ(stiff.nonZeros(), A.nonZeros());
+  CholmodSolver solver;
+  solver.analyze(A);
+  ASSERT_EQ(solver.method(), "cholmod-supernodal-llt");
+  const Eigen::VectorXd b = random_vector(A.rows(), 77);
+  Eigen::VectorXd x(A.rows()), x_preconditioner(A.rows());
+
+  ASSERT_TRUE(solver.factorize(stiff));
+  solver.solve(b, &x);
+  for (int k = 0; k < 2; ++k) {
+    solver.solve_preconditioner(b, &x_preconditioner);
+    EXPECT_LT((x_preconditioner - x).norm(), 1e-12 * x.norm());  // double's answer
+  }
+  EXPECT_EQ(solver.counters().single_precision_declined, 1);
+  EXPECT_EQ(solver.counters().single_precision_solves, 0);
+
+  ASSERT_TRUE(solver.factorize(A));
+  solver.solve(b, &x);
+  solver.solve_preconditioner(b, &x_preconditioner);
+  EXPECT_LT((x_preconditioner - x).norm() / x.norm(), 1e-4);
+  EXPECT_GT((x_preconditioner - x).norm() / x.norm(), 1e-12);  // float's
+  EXPECT_EQ(solver.counters().single_precision_declined, 1);
+  EXPECT_EQ(solver.counters().single_precision_solves, 1);
+}
+
+// Right-hand sides far outside float's range (a Newton residual near its
+// root can be 1e-40 and below) are scaled before the float solve, so the
+// answer keeps float's relative precision; the float solve flushes
+// subnormals and leaves the caller's floating-point control as it was.
+TEST(CholmodSolverTest, PreconditionerSolveKeepsTinyAndHugeRightHandSides) {
+  const SparseMatrix A = cloth_matrix(40, 78);
+  CholmodSolver solver;
+  solver.analyze(A);
+  ASSERT_TRUE(solver.factorize(A));
+  const Eigen::VectorXd b = random_vector(A.rows(), 79);
+  Eigen::VectorXd x(A.rows()), x_single(A.rows());
+  solver.solve(b, &x);
+#if defined(__SSE2__)
+  const unsigned int control = _mm_getcsr();
+#endif
+  for (const double size : {1e-300, 1e-45, 1.0, 1e60}) {
+    solver.solve_preconditioner(size * b, &x_single);
+    EXPECT_LT((x_single / size - x).norm() / x.norm(), 1e-4)
+        << "right-hand side scaled by " << size;
+  }
+#if defined(__SSE2__)
+  EXPECT_EQ(_mm_getcsr(), control);
+#endif
+  EXPECT_EQ(solver.counters().single_precision_solves, 4);
+  solver.solve_preconditioner(Eigen::VectorXd::Zero(A.rows()), &x_single);
+  EXPECT_EQ(x_single, Eigen::VectorXd::Zero(A.rows()));
 }
 
 // The LDL^T fallback re-analyzes as simplicial whichever LL^T was chosen; a

@@ -342,8 +342,11 @@ class ImplicitIntegrator : public IntegratorBase {
   // matrix is singular.
   bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h,
                                bool preconditioner = false);
-  // dx = A^-1 rhs with the current factorization.
-  void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx);
+  // dx = A^-1 rhs with the current factorization; as a preconditioner
+  // (GMRES), in the solver's single precision where it has one
+  // (LinearSolver::solve_preconditioner).
+  void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx,
+                              bool preconditioner = false);
   bool iteration_matrix_factored() const { return matrices_[active_].factored; }
   void invalidate_factorization() {
     for (auto& m : matrices_) m.factored = false;
@@ -597,6 +600,13 @@ class ImplicitIntegrator : public IntegratorBase {
   // they set a stale preconditioner's budget of products (krylov_direction).
   double last_refactor_seconds_ = 0.0;
   double product_seconds_ = 0.0;
+  // The linear solvers' single-precision setups (a float copy of the factor
+  // and its check, LinearSolverCounters), made at a factorization's first
+  // preconditioner solve: newton_gmres counts them with the factorization,
+  // not as products (a fresh solve of one or two products would otherwise
+  // report a product time several times the real one, and the next stale
+  // solve's budget of products would shrink by as much).
+  double preconditioner_setup_seconds_ = 0.0;
   // The products a solve with a fresh preconditioner is expected to take
   // at the constant forcing (1-6 on the folding 100x100 sheet); no solve
   // is abandoned before this many.

@@ -143,6 +143,12 @@ struct IntegratorStatistics {
   // refactored at the iterate (a factorizations_krylov_failed) and the
   // solve repeated (both in krylov_solves; not in krylov_failures).
   long krylov_stale_solves_abandoned = 0;
+  // GMRES's preconditioner solves made in single precision (a supernodal
+  // LL^T: CholmodSolver::solve_preconditioner), and factorizations whose
+  // first float solve missed W by more than kSinglePrecisionResidual, so
+  // that their preconditioner solves ran in double.
+  long single_precision_solves = 0;
+  long single_precision_declined = 0;
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's

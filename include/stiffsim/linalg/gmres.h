@@ -8,6 +8,10 @@
 // whose solve() returns a new vector; the step allocates nothing. One cycle,
 // no restart: a Newton solve that needs more products than the basis holds
 // is better served by a fresh factorization (the cost model's business).
+// It keeps P^-1 v for every basis vector and builds x from those (flexible
+// GMRES), so A Z = V H holds as computed and the residual it reports is
+// x's whatever P^-1 did: the preconditioner need not be exactly linear (a
+// single-precision solve, LinearSolver::solve_preconditioner).
 
 #include <Eigen/Core>
 #include <cmath>

@@ -25,6 +25,13 @@ struct LinearSolverCounters {
                             // including one redone by a fallback
   long factorizations = 0;  // factorize() calls, failed ones included
   long solves = 0;          // right-hand sides solved
+  // solve_preconditioner(): solves in single precision, and factorizations
+  // whose check of the float solve's residual sent them to double.
+  long single_precision_solves = 0;
+  long single_precision_declined = 0;
+  // The float copies of factors and their checks, within solve_seconds: a
+  // cost of each factorization, paid at its first preconditioner solve.
+  double single_precision_setup_seconds = 0.0;
   double analysis_seconds = 0.0;
   double factorization_seconds = 0.0;
   double solve_seconds = 0.0;
@@ -63,6 +70,12 @@ class LinearSolver {
   // n and one solve has been done. x may not alias b. Throws std::logic_error
   // without a successful factorize().
   virtual void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) = 0;
+  // x ~ A^-1 b for a preconditioner: the same factorization applied in
+  // single precision where the solver holds one (a supernodal LL^T), which
+  // halves the bytes a bandwidth-bound solve reads; solve() otherwise. The
+  // result is a fixed function of b but not exactly linear in it: for
+  // callers that tolerate that (flexible GMRES, which keeps P^-1 v).
+  virtual void solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) { solve(b, x); }
 
   // What is in use now ("cholmod-supernodal-llt", "cholmod-simplicial-llt",
   // "cholmod-ldlt", "umfpack", "dense-lu", ...); a fallback changes it, and a
