@@ -63,7 +63,8 @@ struct RunOptions {
   std::string integrator;
   double t_final = 0.0, step = 0.0, accuracy = 0.0, sample_period = 0.0;
   bool fixed_step = false, error_estimate = false;
-  std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve, newton_tolerance;
+  std::string jacobian, linear_solver, newton_form, error_estimator, newton_solve, newton_tolerance,
+      preconditioner_precision;
   bool full_newton = false, no_reuse = false, verify_roots = false;
   std::string output, stats, vtk;
   std::vector<std::string> sets;
@@ -75,7 +76,8 @@ struct RunOptions {
               *fixed_step_option = nullptr, *error_estimate_option = nullptr,
               *jacobian_option = nullptr, *linear_solver_option = nullptr,
               *newton_form_option = nullptr, *error_estimator_option = nullptr,
-              *newton_solve_option = nullptr, *newton_tolerance_option = nullptr;
+              *newton_solve_option = nullptr, *newton_tolerance_option = nullptr,
+              *preconditioner_precision_option = nullptr;
 };
 
 void add_run_options(CLI::App* run, RunOptions* o) {
@@ -179,6 +181,14 @@ void add_run_options(CLI::App* run, RunOptions* o) {
                       "or accuracy (0.05 times the accuracy, as under error control)")
           ->check(CLI::IsMember(newton_tolerance_names()))
           ->group(newton);
+  o->preconditioner_precision_option =
+      run->add_option("--preconditioner-precision", o->preconditioner_precision,
+                      "GMRES's preconditioner solves on the Krylov path: single (default: a "
+                      "float copy of a supernodal factor, where its first solve after each "
+                      "factorization misses the matrix by at most 1e-3; double otherwise) or "
+                      "double")
+          ->check(CLI::IsMember(preconditioner_precision_names()))
+          ->group(newton);
   run->add_flag("--full-newton", o->full_newton,
                 "Fresh Jacobian and factorization at every Newton iteration")
       ->group(newton);
@@ -238,6 +248,9 @@ RunOverrides overrides_from(const RunOptions& o) {
   if (o.error_estimator_option->count() > 0) r.error_estimator = o.error_estimator;
   if (o.newton_solve_option->count() > 0) r.newton_solve = o.newton_solve;
   if (o.newton_tolerance_option->count() > 0) r.newton_tolerance = o.newton_tolerance;
+  if (o.preconditioner_precision_option->count() > 0) {
+    r.preconditioner_precision = o.preconditioner_precision;
+  }
   r.full_newton = o.full_newton;
   r.no_reuse = o.no_reuse;
   r.verify_roots = o.verify_roots;

@@ -353,6 +353,7 @@ PYBIND11_MODULE(_stiffsim, m) {
       .def_readwrite("error_estimator", &RunOverrides::error_estimator)
       .def_readwrite("newton_solve", &RunOverrides::newton_solve)
       .def_readwrite("newton_tolerance", &RunOverrides::newton_tolerance)
+      .def_readwrite("preconditioner_precision", &RunOverrides::preconditioner_precision)
       .def_readwrite("full_newton", &RunOverrides::full_newton)
       .def_readwrite("no_reuse", &RunOverrides::no_reuse);
 

@@ -55,6 +55,8 @@ _OPTION_NAMES = (
     "newton_form",
     "error_estimator",
     "newton_solve",
+    "newton_tolerance",
+    "preconditioner_precision",
     "full_newton",
     "no_reuse",
 )
@@ -110,7 +112,7 @@ class Simulator:
     Keywords are the options of `stiffsim run` without dashes (integrator,
     step, accuracy, fixed_step, error_estimate, t_final, sample_period,
     jacobian, linear_solver, newton_form, error_estimator, newton_solve,
-    full_newton, no_reuse); each overrides the scene's simulation block
+    newton_tolerance, preconditioner_precision, full_newton, no_reuse); each overrides the scene's simulation block
     when given. See the module docstring for the copy rule of q, v and z.
     """
 

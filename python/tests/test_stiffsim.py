@@ -182,6 +182,22 @@ def test_option_errors_are_input_errors(models):
         stiffsim.run(models / "rope.yaml", output="/nonexistent/dir/x.csv", overrides=ROPE_SMALL)
 
 
+def test_preconditioner_precision_is_an_option(models):
+    # The 32x32 cloth's Krylov path applies its supernodal factor in single
+    # precision unless asked for double, as --preconditioner-precision does.
+    scene = stiffsim.load_scene(models / "cloth.yaml")
+    counts = {}
+    for precision in ("single", "double"):
+        sim = stiffsim.Simulator(scene, newton_solve="krylov", t_final=0.1, fixed_step=True,
+                                 preconditioner_precision=precision)
+        sim.advance_to()
+        counts[precision] = (sim.stats["krylov_iterations"], sim.stats["single_precision_solves"])
+    assert counts["single"][0] > 0 and counts["single"][1] == counts["single"][0]
+    assert counts["double"][0] > 0 and counts["double"][1] == 0
+    with pytest.raises(stiffsim.InputError, match="unknown preconditioner precision 'half'"):
+        stiffsim.Simulator(scene, preconditioner_precision="half")
+
+
 def test_numerical_failure_carries_t_and_h(models, cli, tmp_path):
     # Explicit Euler at 10 ms on the stiff cloth (k = 1e6, 32x32 nodes) is far
     # past its stability limit: the first steps blow up.

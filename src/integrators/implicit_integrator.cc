@@ -57,6 +57,14 @@ std::string newton_tolerance_name(bool step_error_tolerance) {
   return step_error_tolerance ? "step-error" : "accuracy";
 }
 
+bool parse_preconditioner_precision(const std::string& name) {
+  if (name == "single") return true;
+  if (name == "double") return false;
+  throw InputError("unknown preconditioner precision '" + name + "' (expected single or double)");
+}
+
+std::string preconditioner_precision_name(bool single) { return single ? "single" : "double"; }
+
 ImplicitErrorEstimate parse_error_estimator(const std::string& name) {
   if (name == "trapezoid") return ImplicitErrorEstimate::kTrapezoid;
   if (name == "doubling") return ImplicitErrorEstimate::kStepDoubling;
@@ -416,7 +424,7 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   } else {
     const IterationMatrix& m = matrices_[active_];
     LinearSolver& solver = *(m.covered_active ? m.covered.solver : m.solver.solver);
-    if (preconditioner) {
+    if (preconditioner && implicit_.single_precision_preconditioner) {
       const LinearSolverCounters before = solver.counters();
       solver.solve_preconditioner(rhs, dx);
       const LinearSolverCounters& after = solver.counters();
@@ -1874,6 +1882,10 @@ IntegratorReport ImplicitIntegrator::report() const {
                      : krylov_               ? "krylov"
                                              : "chord";
     r.newton_solve_reason = newton_solve_reason_;
+    if (krylov_ && !structured_) {
+      r.preconditioner_precision =
+          preconditioner_precision_name(implicit_.single_precision_preconditioner);
+    }
   }
   r.extrapolated = implicit_.extrapolate;
   const LinearSolverChoice& solver = matrices_[0].solver;

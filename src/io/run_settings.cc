@@ -53,6 +53,10 @@ RunSettings run_settings(const SceneConfig& config, const RunOverrides& o) {
   if (o.newton_tolerance) {
     s.implicit.step_error_tolerance = parse_newton_tolerance(*o.newton_tolerance);
   }
+  if (o.preconditioner_precision) {
+    s.implicit.single_precision_preconditioner =
+        parse_preconditioner_precision(*o.preconditioner_precision);
+  }
   if (o.full_newton) s.implicit.full_newton = true;
   if (o.no_reuse) s.implicit.reuse = false;
   if (o.verify_roots) s.implicit.verify_roots = true;

@@ -24,7 +24,8 @@ std::vector<std::string> simulation_keys() {
           "exact_hessian_near_root",
           "error_estimator",
           "newton_solve",
-          "newton_tolerance"};
+          "newton_tolerance",
+          "preconditioner_precision"};
 }
 
 namespace {
@@ -93,6 +94,10 @@ void read_simulation(const Section& top, SceneConfig* config) {
   if (s.has("newton_tolerance")) {
     implicit.step_error_tolerance =
         parse_newton_tolerance(s.choice_or("newton_tolerance", newton_tolerance_names(), ""));
+  }
+  if (s.has("preconditioner_precision")) {
+    implicit.single_precision_preconditioner = parse_preconditioner_precision(
+        s.choice_or("preconditioner_precision", preconditioner_precision_names(), ""));
   }
   implicit.full_newton = s.boolean_or("full_newton", implicit.full_newton);
   implicit.reuse = s.boolean_or("reuse", implicit.reuse);

@@ -27,6 +27,7 @@ std::vector<std::string> linear_solver_names() {
 std::vector<std::string> newton_form_names() { return {"mass-matrix", "generic"}; }
 std::vector<std::string> error_estimator_names() { return {"trapezoid", "doubling"}; }
 std::vector<std::string> newton_tolerance_names() { return {"step-error", "accuracy"}; }
+std::vector<std::string> preconditioner_precision_names() { return {"single", "double"}; }
 std::vector<std::string> newton_solve_names() {
   return {"auto", "chord", "krylov", "fresh", "recursive"};
 }

@@ -123,6 +123,9 @@ json integrator_json(const IntegratorReport& r) {
   if (!r.newton_solve.empty()) {
     j["newton_solve"] = {{"chosen", r.newton_solve}, {"reason", r.newton_solve_reason}};
   }
+  if (!r.preconditioner_precision.empty()) {
+    j["preconditioner_precision"] = r.preconditioner_precision;
+  }
   j["linear_solver"] = {{"chosen", r.linear_solver},
                         {"reason", r.linear_solver_reason},
                         {"fallback", r.linear_solver_fallback}};

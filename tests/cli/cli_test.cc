@@ -221,6 +221,31 @@ TEST_F(Cli, NewtonToleranceOfFixedStepsIsTheStepsErrorUnlessAsked) {
   EXPECT_EQ(r.exit_code, 2);
 }
 
+TEST_F(Cli, PreconditionerPrecisionIsChosenAndReported) {
+  // The 32x32 cloth's supernodal factor: GMRES's preconditioner solves run
+  // in single precision by default and in double when asked, and the stats
+  // say which.
+  const std::string common = "run '" + kModels +
+                             "cloth.yaml' --t-final 0.2 --fixed-step "
+                             "--step 0.016666666666666666 --newton-solve krylov -q";
+  Result r = run(common + " --stats single.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run(common + " --preconditioner-precision double --stats double.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json single = nlohmann::json::parse(read(dir_ / "single.json"));
+  const nlohmann::json twice = nlohmann::json::parse(read(dir_ / "double.json"));
+  EXPECT_EQ(single["integrator"]["preconditioner_precision"], "single");
+  EXPECT_EQ(twice["integrator"]["preconditioner_precision"], "double");
+  EXPECT_GT(single["statistics"]["krylov_iterations"].get<long>(), 0);
+  EXPECT_EQ(single["statistics"]["single_precision_solves"].get<long>(),
+            single["statistics"]["krylov_iterations"].get<long>());
+  EXPECT_GT(twice["statistics"]["krylov_iterations"].get<long>(), 0);
+  EXPECT_EQ(twice["statistics"]["single_precision_solves"].get<long>(), 0);
+  r = run(common + " --preconditioner-precision half");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--preconditioner-precision"), std::string::npos) << r.err;
+}
+
 TEST_F(Cli, VerifyRootsChecksEverySolveAndChangesNothingElse) {
   // The 8x8 cloth at 1/60 on the chord path (its choices depend on counts,
   // not timings): with --verify-roots every solve is checked and the
@@ -382,6 +407,7 @@ TEST_F(Cli, HelpDescribesEveryOption) {
                              "--newton-form",
                              "--newton-tolerance",
                              "step-error",
+                             "--preconditioner-precision",
                              "--full-newton",
                              "--no-reuse",
                              "--verify-roots",

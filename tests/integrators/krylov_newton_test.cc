@@ -86,6 +86,25 @@ TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
   EXPECT_EQ(st.single_precision_declined, 0);
 }
 
+// Asked for double preconditioner solves, the Krylov path makes none in
+// single precision, and its step still equals fresh direct solves.
+TEST(KrylovNewton, DoublePreconditionerSolvesWhenAsked) {
+  const auto sys = cloth(16, 1e3);
+  const double h = 1.0 / 60, accuracy = 1e-6, tolerance = 0.05 * accuracy;
+  const State start = moving_state(Method::kVie, *sys, h, 3);
+  ImplicitSettings implicit;
+  implicit.newton_solve = NewtonSolve::kKrylov;
+  implicit.single_precision_preconditioner = false;
+  VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
+  vie.initialize(start);
+  vie.integrate_to(start.t + h);
+  const OneStep fresh = step_from(Method::kVie, *sys, start, h, accuracy, NewtonSolve::kFresh);
+  EXPECT_GT(vie.statistics().krylov_iterations, 0);
+  EXPECT_EQ(vie.statistics().single_precision_solves, 0);
+  EXPECT_EQ(vie.report().preconditioner_precision, "double");
+  EXPECT_LE((vie.state().x - fresh.x).lpNorm<Eigen::Infinity>(), 4 * tolerance);
+}
+
 TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(12, 1e6);
   const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);

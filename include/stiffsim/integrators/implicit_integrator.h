@@ -57,6 +57,12 @@ std::string to_string(NewtonSolve solve);
 bool parse_newton_tolerance(const std::string& name);
 std::string newton_tolerance_name(bool step_error_tolerance);
 
+// The precision of GMRES's preconditioner solves
+// (ImplicitSettings::single_precision_preconditioner): "single" (true) or
+// "double" (false).
+bool parse_preconditioner_precision(const std::string& name);
+std::string preconditioner_precision_name(bool single);
+
 ImplicitErrorEstimate parse_error_estimator(const std::string& name);  // "trapezoid" | "doubling"
 std::string to_string(ImplicitErrorEstimate estimator);
 
@@ -155,6 +161,10 @@ struct ImplicitSettings {
   // kappa * accuracy always (a solve to the accuracy, for comparisons with
   // the exact implicit Euler recursion).
   bool step_error_tolerance = true;
+  // GMRES's preconditioner solves (the Krylov path) in single precision
+  // where the factor is a supernodal LL^T whose float solve passes its
+  // check (CholmodSolver::solve_preconditioner); false: in double always.
+  bool single_precision_preconditioner = true;
   // Step-doubling methods propagate 2 x_small - x_big (second order) rather
   // than x_small; fixed-step mode then also takes the three solves.
   bool extrapolate = false;

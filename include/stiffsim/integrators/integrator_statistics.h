@@ -180,6 +180,9 @@ struct IntegratorReport {
   std::string newton_form;             // "mass-matrix" or "generic"
   std::string newton_solve;            // "chord", "krylov", "fresh" or "recursive"
   std::string newton_solve_reason;     // why
+  // GMRES's preconditioner solves: "single" or "double" (where the path
+  // may solve with GMRES)
+  std::string preconditioner_precision;
   std::string linear_solver;           // method in use
   std::string linear_solver_reason;    // why it was chosen
   std::string linear_solver_fallback;  // set if it fell back

@@ -21,7 +21,7 @@ struct RunOverrides {
   std::optional<double> t_final, step, accuracy, sample_period;
   std::optional<bool> fixed_step, error_estimate;
   std::optional<std::string> jacobian, linear_solver, newton_form, error_estimator, newton_solve,
-      newton_tolerance;
+      newton_tolerance, preconditioner_precision;
   bool full_newton = false;  // only ever switches full Newton on, as the flag does
   bool no_reuse = false;     // only ever switches the reuse ladder off
   bool verify_roots = false;  // only ever switches the root check on

@@ -59,5 +59,6 @@ std::vector<std::string> newton_form_names();
 std::vector<std::string> error_estimator_names();
 std::vector<std::string> newton_solve_names();
 std::vector<std::string> newton_tolerance_names();
+std::vector<std::string> preconditioner_precision_names();
 
 }  // namespace stiffsim
