@@ -389,18 +389,12 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
 }
 
 void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
-  if (!factored_ || mode_ != Mode::kLLT || !factor_->is_super || b.size() != n_) {
-    solve(b, x);
-    return;
-  }
-  // Checked only where the factored matrix is kept (P A P^T, formed at the
-  // analysis); the rest solve in double.
-  if (single_.state == Single::State::kDouble || !prepermuted_.active) {
-    solve(b, x);
-    return;
-  }
-  const double scale = b.lpNorm<Eigen::Infinity>();
-  if (scale == 0.0 || !std::isfinite(scale)) {
+  // In double: anything but a supernodal LL^T whose factored matrix is kept
+  // (P A P^T, formed at the analysis, which the check needs), a
+  // factorization the check declined, and a zero or non-finite b.
+  const double scale = b.size() == n_ ? b.lpNorm<Eigen::Infinity>() : 0.0;
+  if (!factored_ || mode_ != Mode::kLLT || !factor_->is_super || !prepermuted_.active ||
+      single_.state == Single::State::kDouble || scale == 0.0 || !std::isfinite(scale)) {
     solve(b, x);
     return;
   }
@@ -432,6 +426,11 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   const int nsuper = static_cast<int>(factor_->nsuper);
   auto& t = single_.gathered;
   if (t.size() < static_cast<Eigen::Index>(factor_->maxesize)) t.resize(factor_->maxesize);
+  // CHOLMOD's supernodal layout: supernode s holds columns super[s] to
+  // super[s + 1] - 1 of L as one dense column-major block of nrow rows at
+  // px[s], its diagonal block first; the rows below are listed at
+  // s[pi[s] + ncol ...]. The two sweeps are CHOLMOD's own (dense triangle,
+  // then a product scattered to or gathered from the rows below), in float.
   using Block = Eigen::Map<const Eigen::MatrixXf>;
   // L y = P b, supernode by supernode: the diagonal block's triangle, then
   // the rows below it.
