@@ -709,6 +709,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       implicit_.exact_hessian_near_root && full_newton && !structured && !last && search_on_g;
   bool exact_next = false;  // the next iteration tries the exact Hessian
   bool exact_used = false;  // this iteration's matrix is the exact Hessian
+  bool near_root_finish = false;  // finishing begun by the chord's update (below)
   for (int i = 0; i < max_iterations; ++i) {
     if (i >= budget) {
       if (!near_root) return false;
@@ -751,6 +752,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     } else if (krylov) {
       if (!krylov_direction(tf, h, x0, *x, r_, forcing, !eisenstat_walker, &dy_)) return false;
     } else if (finishing_now) {
+      if (near_root_finish) ++stats_.fresh_near_root_finishes;
+      near_root_finish = false;
       // A direction GMRES left short of its forcing is still judged by the
       // search; the next iteration refactors.
       if (!finishing_direction(tf, h, x0, *x, r_, &dy_)) {
@@ -919,10 +922,13 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
     const double update_size = dx_.segment(offset, n).lpNorm<Eigen::Infinity>();
     // Solved at most once per iterate (a NaN update never agrees).
     bool chord_solved = false;
+    auto chord_within = [&](double tolerances) {
+      return chord_scale * chord_update_.lpNorm<Eigen::Infinity>() <= tolerances * solve_tolerance_;
+    };
     auto chord_agrees = [&] {
       if (!chord_solved) solve_iteration_matrix(r_, &chord_update_);  // minus the chord's update
       chord_solved = true;
-      return chord_scale * chord_update_.lpNorm<Eigen::Infinity>() <= solve_tolerance_;
+      return chord_within(1.0);
     };
     // The update test (Krylov path): a full update that met its forcing and
     // is within the tolerance ends the solve, as a finishing update does
@@ -1003,6 +1009,28 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (chord_agrees()) {
         residual_converged = true;
         ++stats_.fresh_chord_convergences;
+      } else if (implicit_.finish_near_root && krylov_ && !finishing_failed &&
+                 implicit_.finishing_share > 0.0 && chord_within(kFinishingChordGate)) {
+        // The chord's update within kFinishingChordGate tolerances: the
+        // iterate is nearly converged (the chord, on the clamped matrix
+        // with estimated tensions, overstates the error there: on
+        // cloth_stiff.yaml after an update of 2-3 tolerances it said
+        // 1.1-3.6 tolerances where the exact Hessian's next update was
+        // 0.15-0.33). GMRES on the exact Jacobian against the
+        // factorization just made finishes it in a few products, where the
+        // exact Hessian costs a Jacobian, an assembly and a factorization;
+        // so finishing comes first there, whatever the cost model says
+        // (cloth_stiff.yaml, 10 starts: 0.85x the time, 415 factorizations
+        // instead of 484; cloth.yaml, which rarely starts with full Newton,
+        // equal times). Gates of 3 and 30 took 1.02x and 0.97x the time of
+        // 10 (8 starts each, within the noise); with no gate, 1.25x the
+        // time and 700 Newton iterations instead of 485: far from the
+        // root, finishing's linear rate loses to the exact Hessian's
+        // quadratic one.
+        near_root_finish = true;
+        exact_next = false;
+        finishing = true;
+        finishing_update = std::numeric_limits<double>::infinity();
       } else if (!exact_next && krylov_ && !finishing_failed && finishing_pays()) {
         // The chord's update, within kChordTestGate of the tolerance, says
         // the iterate is near the root, but not near enough: there full

@@ -22,6 +22,7 @@ std::vector<std::string> simulation_keys() {
           "reuse",
           "definite_iteration_matrix",
           "exact_hessian_near_root",
+          "finish_near_root",
           "error_estimator",
           "newton_solve",
           "newton_tolerance",
@@ -105,6 +106,7 @@ void read_simulation(const Section& top, SceneConfig* config) {
       s.boolean_or("definite_iteration_matrix", implicit.definite_iteration_matrix);
   implicit.exact_hessian_near_root =
       s.boolean_or("exact_hessian_near_root", implicit.exact_hessian_near_root);
+  implicit.finish_near_root = s.boolean_or("finish_near_root", implicit.finish_near_root);
 }
 
 }  // namespace scene_file

@@ -169,6 +169,7 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   reuse: false
   definite_iteration_matrix: false
   exact_hessian_near_root: false
+  finish_near_root: false
   newton_tolerance: accuracy
   preconditioner_precision: double
 )"),
@@ -182,9 +183,11 @@ TEST(SceneYaml, ReadsImplicitOptionsOfTheSimulationBlock) {
   EXPECT_FALSE(config.implicit.reuse);
   EXPECT_FALSE(config.implicit.definite_iteration_matrix);
   EXPECT_FALSE(config.implicit.exact_hessian_near_root);
+  EXPECT_FALSE(config.implicit.finish_near_root);
   EXPECT_FALSE(config.implicit.step_error_tolerance);
   EXPECT_FALSE(config.implicit.single_precision_preconditioner);
   EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.exact_hessian_near_root);
+  EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.finish_near_root);
   // Without the key, fixed steps take their tolerance from their own error.
   EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.step_error_tolerance);
   EXPECT_TRUE(parse_scene(kCloth, "s.yaml").implicit.single_precision_preconditioner);

@@ -99,6 +99,11 @@ struct ImplicitSettings {
   // a finishing solve's products cost less than this share of a Jacobian
   // and factorization (see ImplicitIntegrator::finishing_pays). 0: never.
   double finishing_share = 0.3;
+  // Where full Newton's chord test fails but its update is within
+  // kFinishingChordGate tolerances, finishing follows at once, ahead of the
+  // exact Hessian and of the cost model (see newton()); finishing_share = 0
+  // still turns finishing off. false: only where finishing_share allows.
+  bool finish_near_root = true;
   // The Krylov path's preconditioner is factored, for large symmetric
   // iteration matrices, without the couplings the system says stiffer
   // elements cover (System::covered_couplings: a cloth's or rope's bend
@@ -540,6 +545,10 @@ class ImplicitIntegrator : public IntegratorBase {
   // A finishing update the search cut below this ends finishing for the
   // solve.
   static constexpr double kFinishingCut = 0.25;
+  // Full Newton finishes, ahead of the exact Hessian and whatever the cost
+  // model says, where the chord's update is within this many tolerances
+  // (ImplicitSettings::finish_near_root).
+  static constexpr double kFinishingChordGate = 10.0;
   // Whether a finishing solve is expected to cost less than
   // ImplicitSettings::finishing_share of the Jacobian and factorization it
   // replaces, at the products finishing solves took lately (decayed as the

@@ -120,6 +120,10 @@ struct IntegratorStatistics {
   // solves they ended (an update within the tolerance).
   long fresh_finishing_solves = 0;
   long fresh_finishing_convergences = 0;
+  // Finishing begun because the chord's update came within
+  // kFinishingChordGate tolerances (ImplicitSettings::finish_near_root),
+  // ahead of the exact Hessian and of the cost model.
+  long fresh_near_root_finishes = 0;
   // Krylov solves given up because the line search cut kStalledUpdates
   // updates in a row to a small fraction (ImplicitIntegrator::newton()).
   long krylov_stalled_solves = 0;
