@@ -489,6 +489,16 @@ SameStepsAsDirect expect_same_steps_as_direct(
   return result;
 }
 
+// The 16x16 sheet of k = 1e6 springs at a fixed 1/60 for 1 s under
+// `implicit`: its statistics.
+IntegratorStatistics stiff_sheet_for_a_second(const ImplicitSettings& implicit) {
+  const auto sys = cloth(16, 1e6);
+  VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
+  vie.initialize(sys->initial_state());
+  vie.integrate_to(1.0);
+  return vie.statistics();
+}
+
 // Full Newton on the tension estimate finishes on the exact Jacobian: where
 // the chord test (the factorization just made, solving the new residual)
 // fails after an update near the tolerance, GMRES on the exact Jacobian
@@ -521,11 +531,8 @@ TEST(KrylovNewton, FullNewtonFinishesOnTheExactJacobianAtTheSameSteps) {
   }
   // A share of 0 turns finishing off.
   implicit.finishing_share = 0.0;
-  const auto sys = cloth(16, 1e6);
-  VelocityImplicitEuler off(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
-  off.initialize(sys->initial_state());
-  off.integrate_to(1.0);
-  EXPECT_EQ(off.statistics().fresh_finishing_solves, 0);
+  const IntegratorStatistics off = stiff_sheet_for_a_second(implicit);
+  EXPECT_EQ(off.fresh_finishing_solves, 0);
 }
 
 // Where full Newton's chord test fails after an update near the tolerance
@@ -546,20 +553,28 @@ TEST(KrylovNewton, FullNewtonFinishesNearTheRootAheadOfTheExactHessian) {
   const IntegratorStatistics& on = run.stats;
   EXPECT_GE(on.fresh_finishing_solves, on.fresh_near_root_finishes);
   implicit.finish_near_root = false;
-  const auto sys = cloth(16, 1e6);
-  VelocityImplicitEuler off(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
-  off.initialize(sys->initial_state());
-  off.integrate_to(1.0);
-  EXPECT_EQ(off.statistics().fresh_near_root_finishes, 0);
+  const IntegratorStatistics off = stiff_sheet_for_a_second(implicit);
+  EXPECT_EQ(off.fresh_near_root_finishes, 0);
   // Measured (Release): 56 fresh starts, near-root finishing in 12 steps,
   // 6 of them compared, the largest velocity difference 2.5e-5 against the
-  // tolerance of 5e-5; 22 exact Hessian factorizations, 44 without the rule.
-  // Only where the run's timings let auto choose the fresh start (as
-  // FullNewtonFinishesOnTheExactJacobianAtTheSameSteps).
+  // tolerance of 5e-5; 22 exact Hessian factorizations, 44 without the rule
+  // (also 56 fresh starts). Only where the run's timings let auto choose
+  // the fresh start (as FullNewtonFinishesOnTheExactJacobianAtTheSameSteps),
+  // and, since each run chooses by its own timings (under load one without
+  // the rule chose it a fraction as often), per fresh start.
   if (on.fresh_first_solves >= 5) {
     EXPECT_GT(on.fresh_near_root_finishes, 0);
-    EXPECT_GE(run.compared, 1);
-    EXPECT_LT(on.exact_hessian_factorizations, off.statistics().exact_hessian_factorizations);
+    if (run.used >= 4) {
+      EXPECT_GE(run.compared, 1);
+    }
+  }
+  if (on.fresh_first_solves >= 5 && off.fresh_first_solves >= 5) {
+    const double exact_on = double(on.exact_hessian_factorizations) / on.fresh_first_solves;
+    const double exact_off = double(off.exact_hessian_factorizations) / off.fresh_first_solves;
+    EXPECT_LT(exact_on, exact_off)
+        << on.exact_hessian_factorizations << " in " << on.fresh_first_solves
+        << " fresh starts against " << off.exact_hessian_factorizations << " in "
+        << off.fresh_first_solves;
   }
 }
 
@@ -576,6 +591,7 @@ TEST(KrylovNewton, ExactHessianNearTheRootGivesTheSameSteps) {
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kAuto;
   implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
+  implicit.finish_near_root = false;      // which would take half its steps
   const SameStepsAsDirect run =
       expect_same_steps_as_direct(implicit, &IntegratorStatistics::exact_hessian_factorizations,
                                   [](const IntegratorStatistics& direct) {
@@ -591,12 +607,9 @@ TEST(KrylovNewton, ExactHessianNearTheRootGivesTheSameSteps) {
   }
   // Off, the clamped matrix throughout.
   implicit.exact_hessian_near_root = false;
-  const auto sys = cloth(16, 1e6);
-  VelocityImplicitEuler off(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
-  off.initialize(sys->initial_state());
-  off.integrate_to(1.0);
-  EXPECT_EQ(off.statistics().exact_hessian_factorizations, 0);
-  EXPECT_EQ(off.statistics().exact_hessian_indefinite, 0);
+  const IntegratorStatistics off = stiff_sheet_for_a_second(implicit);
+  EXPECT_EQ(off.exact_hessian_factorizations, 0);
+  EXPECT_EQ(off.exact_hessian_indefinite, 0);
 }
 
 // Under auto at fixed steps, a third start (full Newton with the springs'
