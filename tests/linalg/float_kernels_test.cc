@@ -1,0 +1,113 @@
+// The AVX2 float kernels of the preconditioner's sweeps against the same
+// operations in double, on blocks of every size around the kernels' steps
+// (four columns, eight rows) and with a leading dimension beyond the rows,
+// as a supernode of CHOLMOD's has. The sweeps as a whole are tested through
+// CholmodSolver::solve_preconditioner (linear_solver_test).
+
+#include "stiffsim/linalg/float_kernels.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <random>
+#include <vector>
+
+namespace stiffsim {
+namespace {
+
+struct Block {
+  int rows, cols, ld;
+  std::vector<float> values;  // column-major, ld >= rows
+  double at(int i, int j) const { return values[static_cast<size_t>(j) * ld + i]; }
+};
+
+// A random block with a dominant diagonal (where rows == cols, a
+// well-conditioned lower triangle), padded below its rows by 3 entries.
+Block random_block(int rows, int cols, std::mt19937* rng) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  Block b{rows, cols, rows + 3, {}};
+  b.values.resize(static_cast<size_t>(b.ld) * std::max(cols, 1));
+  for (float& v : b.values) v = u(*rng);
+  for (int j = 0; j < std::min(rows, cols); ++j)
+    b.values[static_cast<size_t>(j) * b.ld + j] += 4.0f;
+  return b;
+}
+
+std::vector<float> random_vector(int n, std::mt19937* rng) {
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  std::vector<float> v(n);
+  for (float& x : v) x = u(*rng);
+  return v;
+}
+
+// |a - b| / |b| in the infinity norm (b in double).
+double relative_error(const std::vector<float>& a, const Eigen::VectorXd& b) {
+  double diff = 0.0;
+  for (int i = 0; i < b.size(); ++i) diff = std::max(diff, std::abs(a[i] - b[i]));
+  return b.size() == 0 ? 0.0 : diff / std::max(b.lpNorm<Eigen::Infinity>(), 1e-30);
+}
+
+Eigen::MatrixXd dense(const Block& b) {
+  Eigen::MatrixXd m(b.rows, b.cols);
+  for (int j = 0; j < b.cols; ++j) {
+    for (int i = 0; i < b.rows; ++i) m(i, j) = b.at(i, j);
+  }
+  return m;
+}
+
+Eigen::VectorXd to_double(const std::vector<float>& v) {
+  return Eigen::Map<const Eigen::VectorXf>(v.data(), static_cast<Eigen::Index>(v.size()))
+      .cast<double>();
+}
+
+// Float's rounding over sums of up to ~40 terms of unit size, with the
+// triangles' error growth: the kernels agree with double to a few float
+// epsilons (1.2e-7); an indexing error shows as O(1).
+constexpr double kFloatTolerance = 2e-5;
+
+class FloatKernels : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!avx2_float_kernels_available()) GTEST_SKIP() << "no AVX2 with FMA on this CPU";
+  }
+  std::mt19937 rng_{20261128};
+};
+
+TEST_F(FloatKernels, TrianglesSolveAsInDouble) {
+  for (int n = 0; n <= 21; ++n) {
+    const Block L = random_block(n, n, &rng_);
+    const std::vector<float> b = random_vector(n, &rng_);
+    const Eigen::MatrixXd Ld = dense(L);
+    std::vector<float> y = b;
+    avx2::lower_solve(n, L.ld, L.values.data(), y.data());
+    const Eigen::VectorXd expected = Ld.triangularView<Eigen::Lower>().solve(to_double(b));
+    EXPECT_LT(relative_error(y, expected), kFloatTolerance) << "n = " << n;
+    y = b;
+    avx2::lower_transpose_solve(n, L.ld, L.values.data(), y.data());
+    const Eigen::VectorXd expected_t =
+        Ld.triangularView<Eigen::Lower>().transpose().solve(to_double(b));
+    EXPECT_LT(relative_error(y, expected_t), kFloatTolerance) << "n = " << n;
+  }
+}
+
+TEST_F(FloatKernels, ProductsAsInDouble) {
+  for (int m = 0; m <= 19; ++m) {
+    for (int n = 0; n <= 9; ++n) {
+      const Block A = random_block(m, n, &rng_);
+      const Eigen::MatrixXd Ad = dense(A);
+      const std::vector<float> x = random_vector(n, &rng_);
+      std::vector<float> y(m, 7.0f);  // overwritten
+      avx2::product(m, n, A.ld, A.values.data(), x.data(), y.data());
+      EXPECT_LT(relative_error(y, Ad * to_double(x)), kFloatTolerance) << m << " x " << n;
+      const std::vector<float> xt = random_vector(m, &rng_);
+      const std::vector<float> y0 = random_vector(n, &rng_);
+      std::vector<float> yt = y0;
+      avx2::transpose_product_subtract(m, n, A.ld, A.values.data(), xt.data(), yt.data());
+      const Eigen::VectorXd expected = to_double(y0) - Ad.transpose() * to_double(xt);
+      EXPECT_LT(relative_error(yt, expected), kFloatTolerance) << m << " x " << n;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace stiffsim
