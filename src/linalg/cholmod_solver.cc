@@ -432,55 +432,38 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   // px[s], its diagonal block first; the rows below are listed at
   // s[pi[s] + ncol ...]. The two sweeps are CHOLMOD's own (dense triangle,
   // then a product scattered to or gathered from the rows below), in float.
-  if (avx2_float_kernels_) {
-    // The same sweeps eight lanes wide (float_kernels.h), where Eigen's
-    // run four (the build's baseline SSE2): BM_SolvePreconditioner/100 took
-    // 2.8-3.2 ms against 4.0-4.3 ms, /32 0.15 ms against 0.19-0.21 ms (two
-    // alternated rounds); the 100x100 sheet at 1/60 to 0.5 s 0.88x the
-    // time (3 starts), cloth.yaml at 1/60 for 2 s 0.83x (10).
-    float* values = single_.values.data();
-    float* yp = y.data();
-    float* tp = t.data();
-    for (int s = 0; s < nsuper; ++s) {
-      const int k1 = super[s], ncol = super[s + 1] - k1;
-      const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-      const float* L = values + px[s];
-      avx2::lower_solve(ncol, nrow, L, yp + k1);
-      if (nbelow > 0) {
-        avx2::product(nbelow, ncol, nrow, L + ncol, yp + k1, tp);
-        const int* below = rows + pi[s] + ncol;
-        for (int i = 0; i < nbelow; ++i) yp[below[i]] -= tp[i];
-      }
-    }
-    for (int s = nsuper - 1; s >= 0; --s) {
-      const int k1 = super[s], ncol = super[s + 1] - k1;
-      const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-      const float* L = values + px[s];
-      if (nbelow > 0) {
-        const int* below = rows + pi[s] + ncol;
-        for (int i = 0; i < nbelow; ++i) tp[i] = yp[below[i]];
-        avx2::transpose_product_subtract(nbelow, ncol, nrow, L + ncol, tp, yp + k1);
-      }
-      avx2::lower_transpose_solve(ncol, nrow, L, yp + k1);
-    }
-  }
+  // Each block operation runs eight lanes wide where the CPU has AVX2 with
+  // FMA (float_kernels.h), and four in Eigen's (the build's baseline SSE2)
+  // elsewhere: BM_SolvePreconditioner/100 took 2.8-3.2 ms against
+  // 4.0-4.3 ms, /32 0.15 ms against 0.19-0.21 ms (two alternated rounds);
+  // the 100x100 sheet at 1/60 to 0.5 s 0.88x the time (3 starts),
+  // cloth.yaml at 1/60 for 2 s 0.83x (10).
   using Block = Eigen::Map<const Eigen::MatrixXf>;
+  const bool wide = avx2_float_kernels_;
   // L y = P b, supernode by supernode: the diagonal block's triangle, then
   // the rows below it.
-  for (int s = 0; s < nsuper && !avx2_float_kernels_; ++s) {
+  for (int s = 0; s < nsuper; ++s) {
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
     const Block L(single_.values.data() + px[s], nrow, ncol);
     auto head = y.segment(k1, ncol);
-    L.topRows(ncol).triangularView<Eigen::Lower>().solveInPlace(head);
+    if (wide) {
+      avx2::lower_solve(ncol, nrow, L.data(), head.data());
+    } else {
+      L.topRows(ncol).triangularView<Eigen::Lower>().solveInPlace(head);
+    }
     if (nbelow > 0) {
-      t.head(nbelow).noalias() = L.bottomRows(nbelow) * head;
+      if (wide) {
+        avx2::product(nbelow, ncol, nrow, L.data() + ncol, head.data(), t.data());
+      } else {
+        t.head(nbelow).noalias() = L.bottomRows(nbelow) * head;
+      }
       const int* below = rows + pi[s] + ncol;
       for (int i = 0; i < nbelow; ++i) y[below[i]] -= t[i];
     }
   }
   // L^T z = y, in reverse.
-  for (int s = nsuper - 1; s >= 0 && !avx2_float_kernels_; --s) {
+  for (int s = nsuper - 1; s >= 0; --s) {
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
     const Block L(single_.values.data() + px[s], nrow, ncol);
@@ -488,9 +471,18 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
     if (nbelow > 0) {
       const int* below = rows + pi[s] + ncol;
       for (int i = 0; i < nbelow; ++i) t[i] = y[below[i]];
-      head.noalias() -= L.bottomRows(nbelow).transpose() * t.head(nbelow);
+      if (wide) {
+        avx2::transpose_product_subtract(nbelow, ncol, nrow, L.data() + ncol, t.data(),
+                                         head.data());
+      } else {
+        head.noalias() -= L.bottomRows(nbelow).transpose() * t.head(nbelow);
+      }
     }
-    L.topRows(ncol).triangularView<Eigen::Lower>().transpose().solveInPlace(head);
+    if (wide) {
+      avx2::lower_transpose_solve(ncol, nrow, L.data(), head.data());
+    } else {
+      L.topRows(ncol).triangularView<Eigen::Lower>().transpose().solveInPlace(head);
+    }
   }
   double residual = 0.0;
   if (check) {
