@@ -9,6 +9,9 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -22,12 +25,15 @@ struct Block {
 };
 
 // A random block with a dominant diagonal (where rows == cols, a
-// well-conditioned lower triangle), padded below its rows by 3 entries.
+// well-conditioned lower triangle), padded below its rows by 3 NaNs: a
+// kernel that reads past a column's rows returns NaN.
 Block random_block(int rows, int cols, std::mt19937* rng) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   Block b{rows, cols, rows + 3, {}};
   b.values.resize(static_cast<size_t>(b.ld) * std::max(cols, 1));
-  for (float& v : b.values) v = u(*rng);
+  for (size_t k = 0; k < b.values.size(); ++k) {
+    b.values[k] = static_cast<int>(k % b.ld) < rows ? u(*rng) : std::nanf("");
+  }
   for (int j = 0; j < std::min(rows, cols); ++j)
     b.values[static_cast<size_t>(j) * b.ld + j] += 4.0f;
   return b;
@@ -40,10 +46,14 @@ std::vector<float> random_vector(int n, std::mt19937* rng) {
   return v;
 }
 
-// |a - b| / |b| in the infinity norm (b in double).
+// |a - b| / |b| in the infinity norm (b in double); infinite where a has
+// a NaN.
 double relative_error(const std::vector<float>& a, const Eigen::VectorXd& b) {
   double diff = 0.0;
-  for (int i = 0; i < b.size(); ++i) diff = std::max(diff, std::abs(a[i] - b[i]));
+  for (int i = 0; i < b.size(); ++i) {
+    if (!std::isfinite(a[i])) return std::numeric_limits<double>::infinity();
+    diff = std::max(diff, std::abs(a[i] - b[i]));
+  }
   return b.size() == 0 ? 0.0 : diff / std::max(b.lpNorm<Eigen::Infinity>(), 1e-30);
 }
 
@@ -96,9 +106,11 @@ TEST_F(FloatKernels, ProductsAsInDouble) {
       const Block A = random_block(m, n, &rng_);
       const Eigen::MatrixXd Ad = dense(A);
       const std::vector<float> x = random_vector(n, &rng_);
-      std::vector<float> y(m, 7.0f);  // overwritten
+      // m entries overwritten, then 8 that must stay (no store past y's end)
+      std::vector<float> y(m + 8, 7.0f);
       avx2::product(m, n, A.ld, A.values.data(), x.data(), y.data());
       EXPECT_LT(relative_error(y, Ad * to_double(x)), kFloatTolerance) << m << " x " << n;
+      EXPECT_EQ(std::count(y.begin() + m, y.end(), 7.0f), 8) << m << " x " << n;
       const std::vector<float> xt = random_vector(m, &rng_);
       const std::vector<float> y0 = random_vector(n, &rng_);
       std::vector<float> yt = y0;
