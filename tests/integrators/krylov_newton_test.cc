@@ -349,12 +349,13 @@ TEST(KrylovNewton, CostModelRefactorsAPoorPreconditioner) {
 // without the springs' tension estimate (and so with or without the
 // full-Newton rung that ends the ladder at fixed steps): its statistics and
 // the time it reached.
-std::pair<IntegratorStatistics, double> folding_sheet_on_the_krylov_path(bool tension_estimate,
-                                                                         double k = 1e6) {
+std::pair<IntegratorStatistics, double> folding_sheet_on_the_krylov_path(
+    bool tension_estimate, double k = 1e6, double forcing = ImplicitSettings{}.krylov_forcing) {
   const auto sys = cloth(12, k);
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kKrylov;
   implicit.tension_estimate = tension_estimate;
+  implicit.krylov_forcing = forcing;
   VelocityImplicitEuler vie(*sys, fixed(1.0 / 60, false, 1e-3), implicit);
   vie.initialize(sys->initial_state());
   vie.integrate_to(0.5);
@@ -371,9 +372,13 @@ std::pair<IntegratorStatistics, double> folding_sheet_on_the_krylov_path(bool te
 // (CostModelKeepsAnExactPreconditioner). The Krylov path alone, without
 // the tension estimate and so without a full-Newton rung. (On the k = 1e6
 // sheet the first step's Krylov solve stalls and, with no rescue, halves
-// the step; under the sanitizers that trajectory abandoned no solve.)
+// the step; under the sanitizers that trajectory abandoned no solve.) At a
+// forcing of 0.1, not the default 0.2: a looser solve often meets its
+// tolerance before it stalls, and whether any is abandoned then depends on
+// the run's timings (at 0.2, 2 runs of 40 abandoned none; at 0.1, none of
+// 60, half of them beside another run).
 TEST(KrylovNewton, StalledSolvesWithAStalePreconditionerAreAbandoned) {
-  const IntegratorStatistics st = folding_sheet_on_the_krylov_path(false, 1e5).first;
+  const IntegratorStatistics st = folding_sheet_on_the_krylov_path(false, 1e5, 0.1).first;
   EXPECT_GT(st.krylov_stale_solves_abandoned, 0);
   EXPECT_GE(st.factorizations_krylov_failed, st.krylov_stale_solves_abandoned);
   EXPECT_EQ(st.iteration_matrix_factorizations,
