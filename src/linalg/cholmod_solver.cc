@@ -433,56 +433,39 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   // s[pi[s] + ncol ...]. The two sweeps are CHOLMOD's own (dense triangle,
   // then a product scattered to or gathered from the rows below), in float.
   // Each block operation runs eight lanes wide where the CPU has AVX2 with
-  // FMA (float_kernels.h), and four in Eigen's (the build's baseline SSE2)
-  // elsewhere: BM_SolvePreconditioner/100 took 2.8-3.2 ms against
+  // FMA, and four in Eigen's (the build's baseline SSE2) elsewhere
+  // (float_kernels.h): BM_SolvePreconditioner/100 took 2.8-3.2 ms against
   // 4.0-4.3 ms, /32 0.15 ms against 0.19-0.21 ms (two alternated rounds);
   // the 100x100 sheet at 1/60 to 0.5 s 0.88x the time (3 starts),
   // cloth.yaml at 1/60 for 2 s 0.83x (10).
-  using Block = Eigen::Map<const Eigen::MatrixXf>;
-  const bool wide = avx2_float_kernels_;
+  const FloatSweepKernels& kernels = *float_kernels_;
+  const float* values = single_.values.data();
+  float* yp = y.data();
+  float* tp = t.data();
   // L y = P b, supernode by supernode: the diagonal block's triangle, then
   // the rows below it.
   for (int s = 0; s < nsuper; ++s) {
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-    const Block L(single_.values.data() + px[s], nrow, ncol);
-    auto head = y.segment(k1, ncol);
-    if (wide) {
-      avx2::lower_solve(ncol, nrow, L.data(), head.data());
-    } else {
-      L.topRows(ncol).triangularView<Eigen::Lower>().solveInPlace(head);
-    }
+    const float* L = values + px[s];
+    kernels.lower_solve(ncol, nrow, L, yp + k1);
     if (nbelow > 0) {
-      if (wide) {
-        avx2::product(nbelow, ncol, nrow, L.data() + ncol, head.data(), t.data());
-      } else {
-        t.head(nbelow).noalias() = L.bottomRows(nbelow) * head;
-      }
+      kernels.product(nbelow, ncol, nrow, L + ncol, yp + k1, tp);
       const int* below = rows + pi[s] + ncol;
-      for (int i = 0; i < nbelow; ++i) y[below[i]] -= t[i];
+      for (int i = 0; i < nbelow; ++i) yp[below[i]] -= tp[i];
     }
   }
   // L^T z = y, in reverse.
   for (int s = nsuper - 1; s >= 0; --s) {
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
-    const Block L(single_.values.data() + px[s], nrow, ncol);
-    auto head = y.segment(k1, ncol);
+    const float* L = values + px[s];
     if (nbelow > 0) {
       const int* below = rows + pi[s] + ncol;
-      for (int i = 0; i < nbelow; ++i) t[i] = y[below[i]];
-      if (wide) {
-        avx2::transpose_product_subtract(nbelow, ncol, nrow, L.data() + ncol, t.data(),
-                                         head.data());
-      } else {
-        head.noalias() -= L.bottomRows(nbelow).transpose() * t.head(nbelow);
-      }
+      for (int i = 0; i < nbelow; ++i) tp[i] = yp[below[i]];
+      kernels.transpose_product_subtract(nbelow, ncol, nrow, L + ncol, tp, yp + k1);
     }
-    if (wide) {
-      avx2::lower_transpose_solve(ncol, nrow, L.data(), head.data());
-    } else {
-      L.topRows(ncol).triangularView<Eigen::Lower>().transpose().solveInPlace(head);
-    }
+    kernels.lower_transpose_solve(ncol, nrow, L, yp + k1);
   }
   double residual = 0.0;
   if (check) {

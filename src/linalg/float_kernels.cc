@@ -1,28 +1,43 @@
 #include "stiffsim/linalg/float_kernels.h"
 
+#include <Eigen/Dense>
+
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
 #define STIFFSIM_AVX2 __attribute__((target("avx2,fma")))
-#else
-#define STIFFSIM_AVX2
 #endif
 
 namespace stiffsim {
+namespace {
 
-bool avx2_float_kernels_available() {
-#if defined(__x86_64__) && defined(__GNUC__)
-  // libgcc's checks include the OS's support for the AVX state (XGETBV).
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-#else
-  return false;
-#endif
+namespace eigen {
+
+using Block = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
+using Vector = Eigen::Map<Eigen::VectorXf>;
+using ConstVector = Eigen::Map<const Eigen::VectorXf>;
+
+void lower_solve(int n, int ld, const float* L, float* y) {
+  const Block triangle(L, n, n, Eigen::OuterStride<>(ld));
+  Vector v(y, n);
+  triangle.triangularView<Eigen::Lower>().solveInPlace(v);
+}
+void lower_transpose_solve(int n, int ld, const float* L, float* y) {
+  const Block triangle(L, n, n, Eigen::OuterStride<>(ld));
+  Vector v(y, n);
+  triangle.triangularView<Eigen::Lower>().transpose().solveInPlace(v);
+}
+void product(int m, int n, int ld, const float* A, const float* x, float* y) {
+  Vector(y, m).noalias() = Block(A, m, n, Eigen::OuterStride<>(ld)) * ConstVector(x, n);
+}
+void transpose_product_subtract(int m, int n, int ld, const float* A, const float* x, float* y) {
+  Vector(y, n).noalias() -=
+      Block(A, m, n, Eigen::OuterStride<>(ld)).transpose() * ConstVector(x, m);
 }
 
-namespace avx2 {
+}  // namespace eigen
 
 #if defined(__x86_64__) && defined(__GNUC__)
-namespace {
+namespace avx2 {
 
 STIFFSIM_AVX2 float horizontal_sum(__m256 v) {
   const __m128 halves = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
@@ -76,7 +91,44 @@ STIFFSIM_AVX2 void add_four_columns(int m, int ld, const float* A, const float* 
   for (; i < m; ++i) y[i] += w[0] * a0[i] + w[1] * a1[i] + w[2] * a2[i] + w[3] * a3[i];
 }
 
-}  // namespace
+STIFFSIM_AVX2 void product(int m, int n, int ld, const float* A, const float* x, float* y) {
+  for (int i = 0; i < m; ++i) y[i] = 0.0f;
+  int j = 0;
+  for (; j + 4 <= n; j += 4) add_four_columns(m, ld, A + static_cast<long>(j) * ld, x + j, y);
+  for (; j < n; ++j) axpy(m, x[j], A + static_cast<long>(j) * ld, y);
+}
+
+STIFFSIM_AVX2 void transpose_product_subtract(int m, int n, int ld, const float* A, const float* x,
+                                              float* y) {
+  // Four columns at a time, sharing each load of x.
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const auto [a0, a1, a2, a3] = four_columns(A + static_cast<long>(j) * ld, ld);
+    __m256 s0 = _mm256_setzero_ps(), s1 = _mm256_setzero_ps();
+    __m256 s2 = _mm256_setzero_ps(), s3 = _mm256_setzero_ps();
+    int i = 0;
+    for (; i + 8 <= m; i += 8) {
+      const __m256 xv = _mm256_loadu_ps(x + i);
+      s0 = _mm256_fmadd_ps(_mm256_loadu_ps(a0 + i), xv, s0);
+      s1 = _mm256_fmadd_ps(_mm256_loadu_ps(a1 + i), xv, s1);
+      s2 = _mm256_fmadd_ps(_mm256_loadu_ps(a2 + i), xv, s2);
+      s3 = _mm256_fmadd_ps(_mm256_loadu_ps(a3 + i), xv, s3);
+    }
+    float t0 = horizontal_sum(s0), t1 = horizontal_sum(s1);
+    float t2 = horizontal_sum(s2), t3 = horizontal_sum(s3);
+    for (; i < m; ++i) {
+      t0 += a0[i] * x[i];
+      t1 += a1[i] * x[i];
+      t2 += a2[i] * x[i];
+      t3 += a3[i] * x[i];
+    }
+    y[j] -= t0;
+    y[j + 1] -= t1;
+    y[j + 2] -= t2;
+    y[j + 3] -= t3;
+  }
+  for (; j < n; ++j) y[j] -= dot(m, A + static_cast<long>(j) * ld, x);
+}
 
 // The triangles go four columns at a time: a 4 x 4 triangle solved in
 // scalars, then one pass over the rest of the four columns. Column by
@@ -119,72 +171,35 @@ STIFFSIM_AVX2 void lower_transpose_solve(int n, int ld, const float* L, float* y
   }
 }
 
-STIFFSIM_AVX2 void product(int m, int n, int ld, const float* A, const float* x, float* y) {
-  for (int i = 0; i < m; ++i) y[i] = 0.0f;
-  int j = 0;
-  for (; j + 4 <= n; j += 4) add_four_columns(m, ld, A + static_cast<long>(j) * ld, x + j, y);
-  for (; j < n; ++j) axpy(m, x[j], A + static_cast<long>(j) * ld, y);
-}
-
-STIFFSIM_AVX2 void transpose_product_subtract(int m, int n, int ld, const float* A, const float* x,
-                                              float* y) {
-  // Four columns at a time, sharing each load of x.
-  int j = 0;
-  for (; j + 4 <= n; j += 4) {
-    const auto [a0, a1, a2, a3] = four_columns(A + static_cast<long>(j) * ld, ld);
-    __m256 s0 = _mm256_setzero_ps(), s1 = _mm256_setzero_ps();
-    __m256 s2 = _mm256_setzero_ps(), s3 = _mm256_setzero_ps();
-    int i = 0;
-    for (; i + 8 <= m; i += 8) {
-      const __m256 xv = _mm256_loadu_ps(x + i);
-      s0 = _mm256_fmadd_ps(_mm256_loadu_ps(a0 + i), xv, s0);
-      s1 = _mm256_fmadd_ps(_mm256_loadu_ps(a1 + i), xv, s1);
-      s2 = _mm256_fmadd_ps(_mm256_loadu_ps(a2 + i), xv, s2);
-      s3 = _mm256_fmadd_ps(_mm256_loadu_ps(a3 + i), xv, s3);
-    }
-    float t0 = horizontal_sum(s0), t1 = horizontal_sum(s1);
-    float t2 = horizontal_sum(s2), t3 = horizontal_sum(s3);
-    for (; i < m; ++i) {
-      t0 += a0[i] * x[i];
-      t1 += a1[i] * x[i];
-      t2 += a2[i] * x[i];
-      t3 += a3[i] * x[i];
-    }
-    y[j] -= t0;
-    y[j + 1] -= t1;
-    y[j + 2] -= t2;
-    y[j + 3] -= t3;
-  }
-  for (; j < n; ++j) y[j] -= dot(m, A + static_cast<long>(j) * ld, x);
-}
-
-#else  // no AVX2 here (avx2_float_kernels_available() is false): plain loops
-
-void lower_solve(int n, int ld, const float* L, float* y) {
-  for (int j = 0; j < n; ++j) {
-    y[j] /= L[static_cast<long>(j) * ld + j];
-    for (int i = j + 1; i < n; ++i) y[i] -= L[static_cast<long>(j) * ld + i] * y[j];
-  }
-}
-void lower_transpose_solve(int n, int ld, const float* L, float* y) {
-  for (int j = n - 1; j >= 0; --j) {
-    for (int i = j + 1; i < n; ++i) y[j] -= L[static_cast<long>(j) * ld + i] * y[i];
-    y[j] /= L[static_cast<long>(j) * ld + j];
-  }
-}
-void product(int m, int n, int ld, const float* A, const float* x, float* y) {
-  for (int i = 0; i < m; ++i) y[i] = 0.0f;
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < m; ++i) y[i] += A[static_cast<long>(j) * ld + i] * x[j];
-  }
-}
-void transpose_product_subtract(int m, int n, int ld, const float* A, const float* x, float* y) {
-  for (int j = 0; j < n; ++j) {
-    for (int i = 0; i < m; ++i) y[j] -= A[static_cast<long>(j) * ld + i] * x[i];
-  }
-}
+}  // namespace avx2
 
 #endif
 
-}  // namespace avx2
+}  // namespace
+
+const FloatSweepKernels& eigen_float_sweep_kernels() {
+  static const FloatSweepKernels kernels{eigen::lower_solve, eigen::lower_transpose_solve,
+                                         eigen::product, eigen::transpose_product_subtract};
+  return kernels;
+}
+
+const FloatSweepKernels* avx2_float_sweep_kernels() {
+#if defined(__x86_64__) && defined(__GNUC__)
+  static const FloatSweepKernels kernels{avx2::lower_solve, avx2::lower_transpose_solve,
+                                         avx2::product, avx2::transpose_product_subtract};
+  // libgcc's checks include the OS's support for the AVX state (XGETBV).
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) return &kernels;
+#endif
+  return nullptr;
+}
+
+const FloatSweepKernels& float_sweep_kernels() {
+  static const FloatSweepKernels& chosen = []() -> const FloatSweepKernels& {
+    const FloatSweepKernels* avx2 = avx2_float_sweep_kernels();
+    return avx2 != nullptr ? *avx2 : eigen_float_sweep_kernels();
+  }();
+  return chosen;
+}
+
 }  // namespace stiffsim

@@ -1,7 +1,7 @@
-// The AVX2 float kernels of the preconditioner's sweeps against the same
-// operations in double, on blocks of every size around the kernels' steps
-// (four columns, eight rows) and with a leading dimension beyond the rows,
-// as a supernode of CHOLMOD's has. The sweeps as a whole are tested through
+// Both sets of float kernels of the preconditioner's sweeps (AVX2 where
+// the CPU has it, and Eigen's) against the same operations in double, on blocks of every size
+// around the kernels' steps (four columns, eight rows) and with a leading dimension beyond the
+// rows, as a supernode of CHOLMOD's has. The sweeps as a whole are tested through
 // CholmodSolver::solve_preconditioner (linear_solver_test).
 
 #include "stiffsim/linalg/float_kernels.h"
@@ -13,6 +13,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace stiffsim {
@@ -75,32 +76,39 @@ Eigen::VectorXd to_double(const std::vector<float>& v) {
 // epsilons (1.2e-7); an indexing error shows as O(1).
 constexpr double kFloatTolerance = 2e-5;
 
-class FloatKernels : public ::testing::Test {
+// Parameter: the kernel set, "avx2" or "eigen".
+class FloatKernels : public ::testing::TestWithParam<const char*> {
  protected:
   void SetUp() override {
-    if (!avx2_float_kernels_available()) GTEST_SKIP() << "no AVX2 with FMA on this CPU";
+    if (std::string(GetParam()) == "eigen") {
+      kernels_ = &eigen_float_sweep_kernels();
+    } else {
+      kernels_ = avx2_float_sweep_kernels();
+      if (kernels_ == nullptr) GTEST_SKIP() << "no AVX2 with FMA on this CPU";
+    }
   }
+  const FloatSweepKernels* kernels_ = nullptr;
   std::mt19937 rng_{20261128};
 };
 
-TEST_F(FloatKernels, TrianglesSolveAsInDouble) {
+TEST_P(FloatKernels, TrianglesSolveAsInDouble) {
   for (int n = 0; n <= 21; ++n) {
     const Block L = random_block(n, n, &rng_);
     const std::vector<float> b = random_vector(n, &rng_);
     const Eigen::MatrixXd Ld = dense(L);
     std::vector<float> y = b;
-    avx2::lower_solve(n, L.ld, L.values.data(), y.data());
+    kernels_->lower_solve(n, L.ld, L.values.data(), y.data());
     const Eigen::VectorXd expected = Ld.triangularView<Eigen::Lower>().solve(to_double(b));
     EXPECT_LT(relative_error(y, expected), kFloatTolerance) << "n = " << n;
     y = b;
-    avx2::lower_transpose_solve(n, L.ld, L.values.data(), y.data());
+    kernels_->lower_transpose_solve(n, L.ld, L.values.data(), y.data());
     const Eigen::VectorXd expected_t =
         Ld.triangularView<Eigen::Lower>().transpose().solve(to_double(b));
     EXPECT_LT(relative_error(y, expected_t), kFloatTolerance) << "n = " << n;
   }
 }
 
-TEST_F(FloatKernels, ProductsAsInDouble) {
+TEST_P(FloatKernels, ProductsAsInDouble) {
   for (int m = 0; m <= 19; ++m) {
     for (int n = 0; n <= 9; ++n) {
       const Block A = random_block(m, n, &rng_);
@@ -108,18 +116,20 @@ TEST_F(FloatKernels, ProductsAsInDouble) {
       const std::vector<float> x = random_vector(n, &rng_);
       // m entries overwritten, then 8 that must stay (no store past y's end)
       std::vector<float> y(m + 8, 7.0f);
-      avx2::product(m, n, A.ld, A.values.data(), x.data(), y.data());
+      kernels_->product(m, n, A.ld, A.values.data(), x.data(), y.data());
       EXPECT_LT(relative_error(y, Ad * to_double(x)), kFloatTolerance) << m << " x " << n;
       EXPECT_EQ(std::count(y.begin() + m, y.end(), 7.0f), 8) << m << " x " << n;
       const std::vector<float> xt = random_vector(m, &rng_);
       const std::vector<float> y0 = random_vector(n, &rng_);
       std::vector<float> yt = y0;
-      avx2::transpose_product_subtract(m, n, A.ld, A.values.data(), xt.data(), yt.data());
+      kernels_->transpose_product_subtract(m, n, A.ld, A.values.data(), xt.data(), yt.data());
       const Eigen::VectorXd expected = to_double(y0) - Ad.transpose() * to_double(xt);
       EXPECT_LT(relative_error(yt, expected), kFloatTolerance) << m << " x " << n;
     }
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Sets, FloatKernels, ::testing::Values("avx2", "eigen"));
 
 }  // namespace
 }  // namespace stiffsim

@@ -119,8 +119,9 @@ class CholmodSolver final : public LinearSolver {
     Eigen::VectorXf y, gathered;
     Eigen::VectorXd residual;
   } single_;
-  // The float sweeps in AVX2 (float_kernels.h) where the CPU has it.
-  const bool avx2_float_kernels_ = avx2_float_kernels_available();
+  // The float sweeps' block kernels: AVX2 where the CPU has it
+  // (float_kernels.h).
+  const FloatSweepKernels* float_kernels_ = &float_sweep_kernels();
   // The float solve's largest relative residual |b - A z| / |b| that
   // solve_preconditioner keeps: a preconditioner that close to A^-1 adds no
   // GMRES products at forcing terms of 0.1-0.2. The shipped cloths' float
