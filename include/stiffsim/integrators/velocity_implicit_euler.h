@@ -70,13 +70,15 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   // mass_diagonal_ for the step from x0 (nullptr unless M is diagonal).
   void load_mass_diagonal(const Eigen::VectorXd& x0);
   // The first Newton iterate of a fixed step of size h from the current
-  // state, given the predictor's: whichever of it and the step's start
-  // (v = v_n) is the lower point of the incremental potential.
+  // state, given the predictor's: whichever of the point
+  // ImplicitSettings::predictor_share of the way to it and the step's
+  // start (v = v_n) is the lower point of the incremental potential.
   const Eigen::VectorXd& first_iterate(double h, const Eigen::VectorXd& predicted);
   const double* mass_diagonal_ = nullptr;
   bool use_potential_merit_ = false;
   Eigen::VectorXd predicted_;  // predictor()'s result
   Eigen::VectorXd start_iterate_;  // first_iterate()'s v = v_n
+  Eigen::VectorXd shared_iterate_;  // ... and its point toward the predictor
   Eigen::VectorXd guess_iterate_;  // guess_potential()'s completed iterate
   // Fixed steps without an estimate: the last step's local error estimate
   // |v - v_pred| / 2 (see do_step()) and the step it was taken with.
