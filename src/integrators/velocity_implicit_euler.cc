@@ -380,11 +380,12 @@ const Eigen::VectorXd& VelocityImplicitEuler::first_iterate(double h,
   // 190 factorizations), cloth_stiff.yaml 0.95x (10; 415 against 428), the
   // 60x60 sheet for 0.5 s 0.47x (8; halvings in none against 6 of 8 runs),
   // the 100x100 sheet 0.96x (5), the 16x16 sheet of k = 1e8 1.04x (6).
-  // Shares of 0.25 and 0.75 did less on the first two; a share of 0 (v_n
-  // always) gave 0.80-1.08x on cloth.yaml in three ensembles. G is no guide to the share: at
-  // G's lowest of 9 points along the line (0.75-1 of the way on most
-  // steps) the sheets took 0.94-1.03x the time of the predictor. Without
-  // the comparison with v_n below, cloth.yaml took 1.35x the time.
+  // Shares of 0.25 and 0.75 (without the comparison below) did less on
+  // the first two; v_n always gave 0.80-1.08x on cloth.yaml in three
+  // ensembles. G is no guide to the share: at G's lowest of 9 points along
+  // the line (0.75-1 of the way on most steps) the sheets took 0.94-1.03x
+  // the time of the predictor. Without the comparison with v_n below,
+  // cloth.yaml took 1.35x the time of the midpoint with it.
   if (&predicted == &state_.x || !has_potential()) return predicted;
   const double tf = state_.t + h;
   load_mass_diagonal(state_.x);  // all G needs here of begin_newton()
