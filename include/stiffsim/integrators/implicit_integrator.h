@@ -97,9 +97,10 @@ struct ImplicitSettings {
   // Fixed steps without an estimate (VIE): Newton starts this share of the
   // way from v_n to the predictor (v_n + h a_n, the last step's velocity
   // change extrapolated), where that point is lower on the incremental
-  // potential than v_n (VelocityImplicitEuler::first_iterate). The
-  // predictor itself still sets the step's Newton tolerance. 1: the
-  // predictor.
+  // potential than v_n (VelocityImplicitEuler::first_iterate), unless the
+  // predictor missed the last step's result by less than a tenth of its
+  // velocity change: then the predictor. The predictor itself still sets
+  // the step's Newton tolerance. 1: the predictor.
   double predictor_share = 0.5;
   // Full Newton on the Krylov path's machinery (auto's fresh start, the
   // rescue at fixed steps) finishes with GMRES on the exact Jacobian where

@@ -83,6 +83,10 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   // Fixed steps without an estimate: the last step's local error estimate
   // |v - v_pred| / 2 (see do_step()) and the step it was taken with.
   double step_error_ = 0.0, step_error_h_ = 0.0;
+  // ... and that step's velocity change |v - v_n| (infinity norm), against
+  // which first_iterate() judges the predictor.
+  double step_change_ = 0.0;
+  static constexpr double kTrustedPredictorMiss = 0.1;
   double g_scale_ = 0.0;       // energy magnitude, for the round-off of G
   ForceJacobians merit_jacobians_;
   // D_k of G_k: merit_jacobians_.dF_dv, or jacobians_.dF_dv where those
