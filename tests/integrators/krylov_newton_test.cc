@@ -216,11 +216,13 @@ class RootNear : public VelocityImplicitEuler {
 // Steps of a falling 24x24 cloth at h = 1/60, with the preconditioner
 // reused across iterations and steps as in a run, each against the root
 // nearest it; returns the largest distance over the Newton tolerance.
-double krylov_steps_against_roots(double accuracy, IntegratorStatistics* stats) {
+double krylov_steps_against_roots(double accuracy, IntegratorStatistics* stats,
+                                  double predictor_share = ImplicitSettings{}.predictor_share) {
   const auto sys = cloth(24, 1e3);
   const double h = 1.0 / 60, tolerance = 0.05 * accuracy;
   ImplicitSettings implicit;
   implicit.newton_solve = NewtonSolve::kKrylov;
+  implicit.predictor_share = predictor_share;
   implicit.step_error_tolerance = false;  // the tolerance stays 0.05 x accuracy
   VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
   vie.initialize(sys->initial_state());
@@ -250,9 +252,14 @@ double krylov_steps_against_roots(double accuracy, IntegratorStatistics* stats) 
 // Eisenstat-Walker forcing the Krylov path once had, whose tightening
 // shrinks the updates as much as contraction does, 40 times in every run.
 // The bound, 20, holds the estimates; the counter says the veto acted.
+// The veto is counted from the predictor itself (predictor_share 1): from
+// the default start, half way to it, the rate test is fooled less often,
+// and in sanitizer builds, whose timings choose other factorizations to
+// reuse, 5 runs of 6 vetoed nothing (Release: every run vetoed).
 TEST(KrylovNewton, RateTestNeedsTheChordsAgreement) {
   IntegratorStatistics stats;
   EXPECT_LE(krylov_steps_against_roots(1e-3, &stats), 20.0);
+  EXPECT_LE(krylov_steps_against_roots(1e-3, &stats, 1.0), 20.0);
   EXPECT_GT(stats.krylov_rate_test_vetoes, 0);
 }
 
