@@ -89,6 +89,9 @@ ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings 
   if (implicit_.max_krylov_iterations < 1) {
     throw InputError("max_krylov_iterations must be at least 1");
   }
+  if (implicit_.refined_solve_products < 1) {
+    throw InputError("refined_solve_products must be at least 1");
+  }
   if (!(implicit_.max_forcing > 0.0 && implicit_.max_forcing < 1.0)) {
     throw InputError("max_forcing must be in (0, 1)");
   }
@@ -299,6 +302,7 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& W, bool sym
                                                  bool preconditioner) {
   IterationMatrix& m = matrices_[active_];
   m.h = h;
+  m.refined = false;  // form_and_factor() says otherwise
   // A preconditioner (after the slot's first factorization, which chooses
   // the solver) leaves out the covered couplings where there are any.
   const SparseMatrix& without =
@@ -359,10 +363,23 @@ bool ImplicitIntegrator::factor_iteration_matrix(const SparseMatrix& W, bool sym
   return m.factored;
 }
 
-bool ImplicitIntegrator::form_and_factor(double h) {
+bool ImplicitIntegrator::form_and_factor(double h, bool refined) {
   bool symmetric = false;
   const SparseMatrix& matrix = form_iteration_matrix(h, &symmetric);
-  return factor_iteration_matrix(matrix, symmetric, h);
+  refined = refined && implicit_.refine_without_covered;
+  const bool factored = factor_iteration_matrix(matrix, symmetric, h, refined);
+  IterationMatrix& m = matrices_[active_];
+  m.refined = refined && m.covered_active;
+  m.if_definite = factor_if_definite_;
+  if (m.refined) {
+    // W's pattern is fixed for the run: only the first copy allocates.
+    if (m.whole.nonZeros() == matrix.nonZeros() && m.whole.rows() == matrix.rows()) {
+      std::copy_n(matrix.valuePtr(), matrix.nonZeros(), m.whole.valuePtr());
+    } else {
+      m.whole = matrix;
+    }
+  }
+  return factored;
 }
 
 void ImplicitIntegrator::choose_newton_solve(long unknowns) {
@@ -424,6 +441,14 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   } else {
     const IterationMatrix& m = matrices_[active_];
     LinearSolver& solver = *(m.covered_active ? m.covered.solver : m.solver.solver);
+    if (!preconditioner && m.refined) {
+      // Its preconditioner's solves count themselves; the products and
+      // GMRES's own work are added here.
+      const double inner = stats_.solve_seconds;
+      solve_refined(rhs, dx);
+      stats_.solve_seconds = inner + seconds_since(start);
+      return;
+    }
     if (preconditioner && implicit_.single_precision_preconditioner) {
       const LinearSolverCounters before = solver.counters();
       solver.solve_preconditioner(rhs, dx);
@@ -440,6 +465,38 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   }
   stats_.solve_seconds += seconds_since(start);
   ++stats_.linear_solves;
+}
+
+void ImplicitIntegrator::solve_refined(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
+  IterationMatrix& m = matrices_[active_];
+  auto apply = [&m](const Eigen::VectorXd& p, Eigen::VectorXd* Wp) { Wp->noalias() = m.whole * p; };
+  auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+    solve_iteration_matrix(r, z, true);
+  };
+  const GmresResult g = gmres(apply, precondition, rhs, Eigen::VectorXd(), kRefinedSolveTolerance,
+                              implicit_.refined_solve_products, &refine_gmres_, dx,
+                              [](int, double) { return false; });
+  ++stats_.refined_solves;
+  stats_.refined_solve_products += g.iterations;
+  if (g.converged) return;
+  // Where the sheet folds, the bend springs leave their stretch springs'
+  // directions and the factor without them stops approximating W: W is
+  // factored whole, as full Newton did before, and solves with it from now
+  // on. Where that fails (W is not definite, though its factor without the
+  // covered couplings was), that factor stays and GMRES's direction stands
+  // for the search to judge.
+  ++stats_.refined_solve_fallbacks;
+  const auto start = WallClock::now();
+  LinearSolver& solver = *m.solver.solver;
+  const bool whole =
+      m.if_definite ? solver.factorize_if_definite(m.whole) : solver.factorize(m.whole);
+  last_factorization_seconds_ += seconds_since(start);
+  stats_.factorization_seconds += seconds_since(start);
+  ++stats_.iteration_matrix_factorizations;
+  ++stats_.factorizations_ladder;  // full Newton's, as the one it replaces
+  if (!whole) return;
+  m.refined = m.covered_active = false;
+  solve_iteration_matrix(rhs, dx);
 }
 
 void ImplicitIntegrator::initialize_newton(int unknowns) {
@@ -724,7 +781,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (exact_next && !exact_used) exact_allowed = false;
       if (!exact_used) {
         compute_jacobian_at_iterate(tf, h, x0, *x);
-        if (!form_and_factor(h)) return false;
+        if (!form_and_factor(h, true)) return false;
       }
     }
     ++stats_.newton_raphson_iterations;
@@ -1597,7 +1654,7 @@ bool ImplicitIntegrator::factor_exact_hessian(double tf, double h, const Eigen::
   compute_jacobian_at_iterate(tf, h, x0, x);
   exact_jacobian_ = false;
   factor_if_definite_ = true;
-  const bool factored = form_and_factor(h);
+  const bool factored = form_and_factor(h, true);
   factor_if_definite_ = false;
   ++(factored ? stats_.exact_hessian_factorizations : stats_.exact_hessian_indefinite);
   return factored;

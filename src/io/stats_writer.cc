@@ -27,7 +27,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 76 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 79 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -77,6 +77,9 @@ json statistics_object(const IntegratorStatistics& s) {
   j["root_checks_unfinished"] = s.root_checks_unfinished;
   j["largest_root_distance_ratio"] = number(s.largest_root_distance_ratio);
   j["covered_coupling_factorizations"] = s.covered_coupling_factorizations;
+  j["refined_solves"] = s.refined_solves;
+  j["refined_solve_products"] = s.refined_solve_products;
+  j["refined_solve_fallbacks"] = s.refined_solve_fallbacks;
   j["newton_tolerance_from_step_error"] = s.newton_tolerance_from_step_error;
   j["newton_tolerance_narrowed"] = s.newton_tolerance_narrowed;
   j["krylov_solves"] = s.krylov_solves;

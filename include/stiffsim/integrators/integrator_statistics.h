@@ -86,9 +86,17 @@ struct IntegratorStatistics {
   long root_checks = 0;
   long root_checks_unfinished = 0;
   double largest_root_distance_ratio = kNaN;
-  // Factorizations of the Krylov path's preconditioner without the covered
-  // couplings (ImplicitSettings::drop_covered_couplings).
+  // Factorizations without the covered couplings: the Krylov path's
+  // preconditioner (ImplicitSettings::drop_covered_couplings) and full
+  // Newton's matrix (ImplicitSettings::refine_without_covered).
   long covered_coupling_factorizations = 0;
+  // Direct solves against such a factor refined on W itself
+  // (ImplicitSettings::refine_without_covered), their GMRES products, and
+  // the solves that missed their tolerance, after which W was factored
+  // whole.
+  long refined_solves = 0;
+  long refined_solve_products = 0;
+  long refined_solve_fallbacks = 0;
   // Fixed steps without an error estimate: step attempts (a halved step's
   // retries included) whose Newton tolerance the step's own local error
   // set (ImplicitSettings::step_error_tolerance).
