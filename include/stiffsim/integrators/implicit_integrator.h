@@ -382,9 +382,12 @@ class ImplicitIntegrator : public IntegratorBase {
                                bool preconditioner = false);
   // dx = A^-1 rhs with the current factorization; as a preconditioner
   // (GMRES), in the solver's single precision where it has one
-  // (LinearSolver::solve_preconditioner).
+  // (LinearSolver::solve_preconditioner). refine: a factor without the
+  // covered couplings made for full Newton is refined to W's solve
+  // (solve_refined()); false: its own solve, in double (an estimate, as
+  // the chord test's).
   void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx,
-                              bool preconditioner = false);
+                              bool preconditioner = false, bool refine = true);
   // dx = W^-1 rhs for a factor without the covered couplings: GMRES on the
   // whole W it was formed from, that factor preconditioning; W is factored
   // whole (and the slot solves directly from then on) where GMRES misses
