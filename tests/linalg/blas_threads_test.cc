@@ -1,9 +1,12 @@
 #include "stiffsim/linalg/blas_threads.h"
 
+#include <dlfcn.h>
 #include <gtest/gtest.h>
 #include <strings.h>
+#include <sys/resource.h>
 
 #include <Eigen/SparseCore>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -21,6 +24,9 @@ extern "C" int omp_get_max_active_levels() __attribute__((weak));
 extern "C" int omp_get_max_threads() __attribute__((weak));
 extern "C" int omp_get_num_threads() __attribute__((weak));
 extern "C" void GOMP_parallel(void (*)(void*), void*, unsigned, unsigned) __attribute__((weak));
+// OpenBLAS's thread count, weak so that the test still links (and skips)
+// with another BLAS.
+extern "C" int openblas_get_num_threads() __attribute__((weak));
 
 namespace stiffsim {
 namespace {
@@ -132,6 +138,43 @@ TEST(BlasThreadsTest, OneThreadAllowsNoActiveLevelAndMoreRestoresOne) {
     EXPECT_GT(team_size_of_region_asking_for_four(), 1);
   }
   set_blas_threads(1);
+}
+
+double process_cpu_seconds() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return usage.ru_utime.tv_sec + 1e-6 * usage.ru_utime.tv_usec + usage.ru_stime.tv_sec +
+         1e-6 * usage.ru_stime.tv_usec;
+}
+
+// One thread leaves no BLAS thread running: OpenBLAS's server threads,
+// which spin for about 0.1 s after each job before they sleep, are shut
+// down. After a threaded product on two threads, the process then uses
+// almost no CPU while it sleeps 0.3 s (with the pool kept at one thread:
+// 0.1-0.15 s measured here).
+TEST(BlasThreadsTest, OneThreadLeavesNoBlasThreadSpinning) {
+  if (openblas_get_num_threads == nullptr) GTEST_SKIP() << "the BLAS is not OpenBLAS";
+  if (std::thread::hardware_concurrency() < 2) GTEST_SKIP() << "one core: no BLAS threads";
+  // The BLAS behind CHOLMOD, which the test does not link itself.
+  using Dgemm = void (*)(const char*, const char*, const int*, const int*, const int*,
+                         const double*, const double*, const int*, const double*, const int*,
+                         const double*, double*, const int*);
+  const auto dgemm_ = reinterpret_cast<Dgemm>(dlsym(RTLD_DEFAULT, "dgemm_"));
+  ASSERT_NE(dgemm_, nullptr);
+  set_blas_threads(2);
+  const int n = 400;
+  std::vector<double> a(n * n, 1.0), c(n * n, 0.0);
+  const double one = 1.0, zero = 0.0;
+  dgemm_("N", "N", &n, &n, &n, &one, a.data(), &n, a.data(), &n, &zero, c.data(), &n);
+  EXPECT_EQ(c[0], n);
+  set_blas_threads(1);
+  EXPECT_EQ(openblas_get_num_threads(), 1);
+  const double before = process_cpu_seconds();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_LT(process_cpu_seconds() - before, 0.03);
+  // Products on one thread still work without the pool.
+  dgemm_("N", "N", &n, &n, &n, &one, a.data(), &n, a.data(), &n, &zero, c.data(), &n);
+  EXPECT_EQ(c[n * n - 1], n);
 }
 
 TEST(BlasThreadsTest, AnExplicitCountWinsOverTheDefault) {
