@@ -67,22 +67,34 @@ void PatternBuilder::add_diagonal(int first, int count) {
 }
 
 SparseMatrix PatternBuilder::build() const {
-  // Sorting a copy keeps build() const and lets the builder be reused.
-  std::vector<std::pair<int, int>> sorted = entries_;
-  std::sort(sorted.begin(), sorted.end());
-  sorted.erase(std::unique(sorted.begin(), sorted.end()), sorted.end());
-
-  SparseMatrix A(rows_, cols_);
-  A.resizeNonZeros(static_cast<Eigen::Index>(sorted.size()));
-  int* outer = A.outerIndexPtr();
-  int* inner = A.innerIndexPtr();
-  std::fill(outer, outer + cols_ + 1, 0);
-  for (std::size_t k = 0; k < sorted.size(); ++k) {
-    ++outer[sorted[k].first + 1];
-    inner[k] = sorted[k].second;
+  // A counting sort by column, then each column's rows sorted and made
+  // unique: linear in the entries but for the short per-column sorts, where
+  // one sort of all (col, row) pairs took 25 ms of a 32x32 cloth's set-up
+  // (its springs add each block entry once per spring, 0.2 M pairs).
+  std::vector<int> start(cols_ + 1, 0);
+  for (const auto& [col, row] : entries_) ++start[col + 1];
+  for (int j = 0; j < cols_; ++j) start[j + 1] += start[j];
+  std::vector<int> rows(entries_.size());
+  {
+    std::vector<int> next(start.begin(), start.end() - 1);
+    for (const auto& [col, row] : entries_) rows[next[col]++] = row;
   }
-  for (int j = 0; j < cols_; ++j) outer[j + 1] += outer[j];
-  std::fill(A.valuePtr(), A.valuePtr() + sorted.size(), 0.0);
+  SparseMatrix A(rows_, cols_);
+  int* outer = A.outerIndexPtr();
+  outer[0] = 0;
+  std::size_t kept = 0;
+  for (int j = 0; j < cols_; ++j) {
+    const auto first = rows.begin() + start[j], last = rows.begin() + start[j + 1];
+    std::sort(first, last);
+    const auto end = std::unique(first, last);
+    // Compacted in place: a column's unique rows move down, never past
+    // their own.
+    for (auto it = first; it != end; ++it) rows[kept++] = *it;
+    outer[j + 1] = static_cast<int>(kept);
+  }
+  A.resizeNonZeros(static_cast<Eigen::Index>(kept));
+  std::copy_n(rows.begin(), kept, A.innerIndexPtr());
+  std::fill(A.valuePtr(), A.valuePtr() + kept, 0.0);
   return A;
 }
 

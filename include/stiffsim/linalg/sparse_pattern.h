@@ -27,7 +27,7 @@ class PatternBuilder {
 
  private:
   int rows_, cols_;
-  std::vector<std::pair<int, int>> entries_;  // (col, row), sorted in build()
+  std::vector<std::pair<int, int>> entries_;  // (col, row), in the order added
 };
 
 // Index into A.valuePtr() of entry (row, col); throws std::out_of_range if
