@@ -491,17 +491,17 @@ void ImplicitIntegrator::solve_refined(const Eigen::VectorXd& rhs, Eigen::Vector
   // covered couplings was), that factor stays and GMRES's direction stands
   // for the search to judge.
   ++stats_.refined_solve_fallbacks;
-  const auto start = WallClock::now();
-  LinearSolver& solver = *m.solver.solver;
-  const bool whole =
-      m.if_definite ? solver.factorize_if_definite(m.whole) : solver.factorize(m.whole);
-  last_factorization_seconds_ += seconds_since(start);
-  stats_.factorization_seconds += seconds_since(start);
-  ++stats_.iteration_matrix_factorizations;
-  ++stats_.factorizations_ladder;  // full Newton's, as the one it replaces
-  if (!whole) return;
-  m.refined = m.covered_active = false;
-  solve_iteration_matrix(rhs, dx);
+  const bool if_definite = factor_if_definite_;
+  factor_if_definite_ = m.if_definite;
+  const bool whole = factor_iteration_matrix(m.whole, true, m.h);
+  factor_if_definite_ = if_definite;
+  if (whole) {
+    solve_iteration_matrix(rhs, dx);
+    return;
+  }
+  // The factor without the covered couplings is still the covered
+  // solver's: it stays in use.
+  m.covered_active = m.refined = m.factored = true;
 }
 
 void ImplicitIntegrator::initialize_newton(int unknowns) {
