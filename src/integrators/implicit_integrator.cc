@@ -8,6 +8,7 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/wall_clock.h"
+#include "stiffsim/linalg/sparse_products.h"
 
 namespace stiffsim {
 
@@ -473,7 +474,7 @@ void ImplicitIntegrator::solve_refined(const Eigen::VectorXd& rhs, Eigen::Vector
   // matrices only): the product with its transpose reads each stored
   // column as a row, a dot product per entry instead of scattered writes.
   auto apply = [&m](const Eigen::VectorXd& p, Eigen::VectorXd* Wp) {
-    Wp->noalias() = m.whole.transpose() * p;
+    transpose_product(m.whole, p, Wp);
   };
   auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
     solve_iteration_matrix(r, z, true);

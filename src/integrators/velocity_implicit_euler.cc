@@ -6,6 +6,7 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/wall_clock.h"
+#include "stiffsim/linalg/sparse_products.h"
 
 namespace stiffsim {
 namespace {
@@ -111,7 +112,6 @@ void VelocityImplicitEuler::do_initialize() {
   if (use_potential_merit_) {
     merit_jacobians_ = system_.jacobian_pattern();
     damping_matrix_ = &merit_jacobians_.dF_dv;
-    Dv_.resize(d.nv);
     g_scale_ = 0.0;
   }
 }
@@ -301,8 +301,7 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
   double inertia = 0.0;
   for (int i = 0; i < d.nv; ++i) inertia += 0.5 * m[i] * dv_[i] * dv_[i];
   if (!damping) return inertia + potential;
-  Dv_.noalias() = *damping_matrix_ * v;
-  return inertia + potential - 0.5 * h * v.dot(Dv_);
+  return inertia + potential - 0.5 * h * quadratic_form(*damping_matrix_, v);
 }
 
 void VelocityImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {

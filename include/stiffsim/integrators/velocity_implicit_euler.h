@@ -93,7 +93,7 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   // were evaluated at the iterate (potential()).
   const SparseMatrix* damping_matrix_ = nullptr;
   State energy_state_;
-  Eigen::VectorXd dv_, Dv_;
+  Eigen::VectorXd dv_;
 
   // Workspaces, sized once in do_initialize().
   SparseMatrix iteration_matrix_;

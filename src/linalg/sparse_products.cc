@@ -1,0 +1,57 @@
+#include "stiffsim/linalg/sparse_products.h"
+
+#include <stdexcept>
+#include <string>
+
+namespace stiffsim {
+namespace {
+
+// The dot product of column j of A with x, in four partial sums.
+inline double column_dot(const int* inner, const double* value, int begin, int end,
+                         const double* x) {
+  double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+  int k = begin;
+  for (; k + 4 <= end; k += 4) {
+    s0 += value[k] * x[inner[k]];
+    s1 += value[k + 1] * x[inner[k + 1]];
+    s2 += value[k + 2] * x[inner[k + 2]];
+    s3 += value[k + 3] * x[inner[k + 3]];
+  }
+  for (; k < end; ++k) s0 += value[k] * x[inner[k]];
+  return (s0 + s1) + (s2 + s3);
+}
+
+void check(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x, const char* caller) {
+  if (!A.isCompressed() || x.size() != A.rows()) {
+    throw std::invalid_argument(std::string(caller) +
+                                ": needs a compressed matrix and a vector of its rows");
+  }
+}
+
+}  // namespace
+
+void transpose_product(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x,
+                       Eigen::VectorXd* y) {
+  check(A, x, "transpose_product");
+  const int n = static_cast<int>(A.cols());
+  if (y->size() != n) y->resize(n);
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const double* value = A.valuePtr();
+  for (int j = 0; j < n; ++j) (*y)[j] = column_dot(inner, value, outer[j], outer[j + 1], x.data());
+}
+
+double quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x) {
+  check(A, x, "quadratic_form");
+  if (A.cols() != A.rows()) throw std::invalid_argument("quadratic_form: needs a square matrix");
+  const int n = static_cast<int>(A.cols());
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const double* value = A.valuePtr();
+  double sum = 0.0;
+  for (int j = 0; j < n; ++j)
+    sum += x[j] * column_dot(inner, value, outer[j], outer[j + 1], x.data());
+  return sum;
+}
+
+}  // namespace stiffsim
