@@ -59,6 +59,8 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   double potential(double t, const Eigen::VectorXd& x0, const Eigen::VectorXd& x, double h,
                    bool new_iterate, bool jacobian_at_x = false) override;
   double potential_roundoff(double g) const override;
+  // Whether form_iteration_matrix() assembles W in one pass (shared_pattern_).
+  bool assembles_in_one_pass() const { return shared_pattern_; }
 
  private:
   // G_k(v) = 1/2 (v - v_n)^T M (v - v_n) + Phi(q_n + h v) - h/2 v^T D_k v,
@@ -98,6 +100,9 @@ class VelocityImplicitEuler : public ImplicitIntegrator {
   // Workspaces, sized once in do_initialize().
   SparseMatrix iteration_matrix_;
   std::vector<int> slots_M_, slots_D_, slots_K_, slots_Fz_, slots_Zq_, slots_Zv_, slots_Zz_;
+  // D and K fill W's pattern in its own order, with no z states: the
+  // mass-matrix form is assembled in one pass (form_iteration_matrix()).
+  bool shared_pattern_ = false;
   std::vector<int> identity_slots_;  // diagonal of the z (or generic) block
   SparseMatrix N_;                   // N(q_k) when N != I
   SparseMatrix KN_, ZqN_;
