@@ -326,7 +326,10 @@ double VelocityImplicitEuler::incremental_potential(double t, const Eigen::Vecto
   double inertia = 0.0;
   for (int i = 0; i < d.nv; ++i) inertia += 0.5 * m[i] * dv_[i] * dv_[i];
   if (!damping) return inertia + potential;
-  return inertia + potential - 0.5 * h * quadratic_form(*damping_matrix_, v);
+  // Particles' damping matrices are symmetric: half of D is read.
+  const double vDv = caps_.symmetric_jacobians ? symmetric_quadratic_form(*damping_matrix_, v)
+                                               : quadratic_form(*damping_matrix_, v);
+  return inertia + potential - 0.5 * h * vDv;
 }
 
 void VelocityImplicitEuler::begin_newton(double t0, double h, const Eigen::VectorXd& x0) {

@@ -1,5 +1,6 @@
 #include "stiffsim/linalg/sparse_products.h"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
@@ -52,6 +53,26 @@ double quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::Vecto
   for (int j = 0; j < n; ++j)
     sum += x[j] * column_dot(inner, value, outer[j], outer[j + 1], x.data());
   return sum;
+}
+
+double symmetric_quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x) {
+  check(A, x, "symmetric_quadratic_form");
+  if (A.cols() != A.rows()) {
+    throw std::invalid_argument("symmetric_quadratic_form: needs a square matrix");
+  }
+  const int n = static_cast<int>(A.cols());
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const double* value = A.valuePtr();
+  double diagonal = 0.0, lower = 0.0;
+  for (int j = 0; j < n; ++j) {
+    // The column's entries on and below the diagonal are its last ones.
+    int below =
+        static_cast<int>(std::lower_bound(inner + outer[j], inner + outer[j + 1], j) - inner);
+    if (below < outer[j + 1] && inner[below] == j) diagonal += value[below++] * x[j] * x[j];
+    lower += x[j] * column_dot(inner, value, below, outer[j + 1], x.data());
+  }
+  return diagonal + 2.0 * lower;
 }
 
 }  // namespace stiffsim

@@ -51,6 +51,25 @@ TEST(SparseProductsTest, QuadraticFormEqualsDotOfProduct) {
               1e-13 * (1.0 + std::abs(expected)));
 }
 
+TEST(SparseProductsTest, SymmetricQuadraticFormReadsHalfOfASymmetricMatrix) {
+  // A + A^T holds both triangles; some columns have no diagonal entry, some
+  // nothing below it.
+  const SparseMatrix B = random_matrix(40, 40, 4);
+  SparseMatrix A = SparseMatrix(B.transpose()) + B;
+  A.makeCompressed();
+  const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(40, -1.0, 2.0);
+  const double expected = x.dot(A * x);
+  EXPECT_NEAR(symmetric_quadratic_form(A, x), expected, 1e-13 * (1.0 + std::abs(expected)));
+  // It reads the lower triangle only: an unsymmetric matrix gives the
+  // form of its lower triangle mirrored, not x^T B x.
+  const SparseMatrix L = B.triangularView<Eigen::Lower>();
+  const SparseMatrix mirrored =
+      SparseMatrix(L.transpose()) + SparseMatrix(L) -
+      SparseMatrix(B.diagonal().asDiagonal().toDenseMatrix().sparseView());
+  EXPECT_NEAR(symmetric_quadratic_form(B, x), x.dot(mirrored * x),
+              1e-13 * (1.0 + std::abs(expected)));
+}
+
 TEST(SparseProductsTest, RejectsMismatchedSizesAndUncompressedMatrices) {
   SparseMatrix A = random_matrix(10, 8, 3);
   Eigen::VectorXd y;

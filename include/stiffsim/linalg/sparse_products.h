@@ -19,4 +19,9 @@ void transpose_product(const SparseMatrix& A, const Eigen::Ref<const Eigen::Vect
 // x^T A x.
 double quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x);
 
+// x^T A x for a symmetric A with both triangles stored and each column's
+// rows sorted: the diagonal and twice the strict lower triangle, half the
+// entries read.
+double symmetric_quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x);
+
 }  // namespace stiffsim
