@@ -131,32 +131,30 @@ const SparseMatrix& VelocityImplicitEuler::form_iteration_matrix(double h, bool*
   SparseMatrix& W = iteration_matrix_;
   const SparseMatrix& K = caps_.identity_velocity_map ? J.dF_dq : KN_;
   const SparseMatrix& Zq = caps_.identity_velocity_map ? J.dfz_dq : ZqN_;
-  if (shared_pattern_ && implicit_.newton_form == NewtonForm::kMassMatrix) {
-    // D, K and W store the same entries in the same order (particles: the
-    // force Jacobians' pattern holds every diagonal block, and so M's
-    // pattern): one pass over the three, where zeroing W and scattering D
-    // and K through their slots took three (cloth_stiff.yaml: 3.7% of the
-    // run's samples).
-    const double* dv = J.dF_dv.valuePtr();
-    const double* kv = K.valuePtr();
-    double* w = W.valuePtr();
-    const Eigen::Index count = W.nonZeros();
-    for (Eigen::Index k = 0; k < count; ++k) w[k] = -h * dv[k] - h * h * kv[k];
-    scatter_add(mass_matrix_at(state_.q(d)), slots_M_, 1.0, &W);
-    stats_.assembly_seconds += seconds_since(start);
-    *symmetric = implicit_.jacobian == JacobianScheme::kAnalytic && caps_.symmetric_jacobians &&
-                 caps_.identity_velocity_map;
-    return W;
-  }
-  set_zero_keep_pattern(&W);
   if (implicit_.newton_form == NewtonForm::kMassMatrix) {
     // W = [M - h D - h^2 K N, -h dF/dz; -h dfz/dv - h^2 dfz/dq N, I - h dfz/dz]
-    scatter_add(mass_matrix_at(state_.q(d)), slots_M_, 1.0, &W);
-    scatter_add(J.dF_dv, slots_D_, -h, &W);
-    scatter_add(K, slots_K_, -h * h, &W);
+    if (shared_pattern_) {
+      // D, K and W store the same entries in the same order (particles:
+      // the force Jacobians' pattern holds every diagonal block, and so
+      // M's pattern): one pass over the three, where zeroing W and
+      // scattering D and K through their slots took three
+      // (cloth_stiff.yaml: 3.7% of the run's samples).
+      const double* dv = J.dF_dv.valuePtr();
+      const double* kv = K.valuePtr();
+      double* w = W.valuePtr();
+      const Eigen::Index count = W.nonZeros();
+      for (Eigen::Index k = 0; k < count; ++k) w[k] = -h * dv[k] - h * h * kv[k];
+      scatter_add(mass_matrix_at(state_.q(d)), slots_M_, 1.0, &W);
+    } else {
+      set_zero_keep_pattern(&W);
+      scatter_add(mass_matrix_at(state_.q(d)), slots_M_, 1.0, &W);
+      scatter_add(J.dF_dv, slots_D_, -h, &W);
+      scatter_add(K, slots_K_, -h * h, &W);
+    }
     for (int i = d.nv; i < d.ny(); ++i) W.valuePtr()[identity_slots_[i]] += 1.0;
   } else {
     // A = I - h J_l with J_l = [M^-1 (D + h K N), M^-1 dF/dz; dfz/dv + h dfz/dq N, dfz/dz].
+    set_zero_keep_pattern(&W);
     const double* m = mass_matrix_at(state_.q(d)).valuePtr();
     for (int i = 0; i < d.ny(); ++i) W.valuePtr()[identity_slots_[i]] += 1.0;
     scatter_add_row_scaled(J.dF_dv, slots_D_, -h, m, &W);

@@ -22,10 +22,12 @@ inline double column_dot(const int* inner, const double* value, int begin, int e
   return (s0 + s1) + (s2 + s3);
 }
 
-void check(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x, const char* caller) {
-  if (!A.isCompressed() || x.size() != A.rows()) {
-    throw std::invalid_argument(std::string(caller) +
-                                ": needs a compressed matrix and a vector of its rows");
+// square: the quadratic forms need A square as well.
+void check(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x, const char* caller,
+           bool square) {
+  if (!A.isCompressed() || x.size() != A.rows() || (square && A.cols() != A.rows())) {
+    throw std::invalid_argument(std::string(caller) + ": needs a compressed" +
+                                (square ? " square" : "") + " matrix and a vector of its rows");
   }
 }
 
@@ -33,7 +35,7 @@ void check(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x, co
 
 void transpose_product(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x,
                        Eigen::VectorXd* y) {
-  check(A, x, "transpose_product");
+  check(A, x, "transpose_product", false);
   const int n = static_cast<int>(A.cols());
   if (y->size() != n) y->resize(n);
   const int* outer = A.outerIndexPtr();
@@ -43,8 +45,7 @@ void transpose_product(const SparseMatrix& A, const Eigen::Ref<const Eigen::Vect
 }
 
 double quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x) {
-  check(A, x, "quadratic_form");
-  if (A.cols() != A.rows()) throw std::invalid_argument("quadratic_form: needs a square matrix");
+  check(A, x, "quadratic_form", true);
   const int n = static_cast<int>(A.cols());
   const int* outer = A.outerIndexPtr();
   const int* inner = A.innerIndexPtr();
@@ -56,10 +57,7 @@ double quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::Vecto
 }
 
 double symmetric_quadratic_form(const SparseMatrix& A, const Eigen::Ref<const Eigen::VectorXd>& x) {
-  check(A, x, "symmetric_quadratic_form");
-  if (A.cols() != A.rows()) {
-    throw std::invalid_argument("symmetric_quadratic_form: needs a square matrix");
-  }
+  check(A, x, "symmetric_quadratic_form", true);
   const int n = static_cast<int>(A.cols());
   const int* outer = A.outerIndexPtr();
   const int* inner = A.innerIndexPtr();
