@@ -252,10 +252,10 @@ const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W) {
       if (pr < 0 || pc < 0 || pr == pc) return false;
       return std::find(partners[pr].begin(), partners[pr].end(), pc) != partners[pr].end();
     };
-    c.target.assign(W.nonZeros(), -1);
+    c.source.clear();
+    c.source.reserve(W.nonZeros());
     c.matrix.resize(n, n);
     c.matrix.reserve(W.nonZeros());
-    int next = 0;
     long below = 0, above = 0;
     std::vector<std::pair<int, int>> left;  // (entry of W, its column)
     for (long col = 0; col < n; ++col) {
@@ -266,7 +266,7 @@ const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W) {
           (inner[k] > col ? below : above) += 1;
         } else {
           c.matrix.insertBack(inner[k], col) = 0.0;
-          c.target[k] = next++;
+          c.source.push_back(k);
         }
       }
     }
@@ -289,12 +289,13 @@ const SparseMatrix& ImplicitIntegrator::factored_matrix(const SparseMatrix& W) {
     }
   }
   if (c.left_out.empty()) return W;
+  // The kept entries are gathered (no test per entry of W), then the
+  // left-out ones added to their twins.
   const double* value = W.valuePtr();
   double* out = c.matrix.valuePtr();
-  const long entries = W.nonZeros();
-  for (long k = 0; k < entries; ++k) {
-    if (c.target[k] >= 0) out[c.target[k]] = value[k];
-  }
+  const int* source = c.source.data();
+  const long kept = static_cast<long>(c.source.size());
+  for (long j = 0; j < kept; ++j) out[j] = value[source[j]];
   for (size_t i = 0; i < c.left_out.size(); ++i) out[c.twin[i]] += value[c.left_out[i]];
   return c.matrix;
 }

@@ -643,7 +643,7 @@ class ImplicitIntegrator : public IntegratorBase {
   struct CoveredCouplings {
     bool examined = false;  // the pattern was built, or found not to apply
     SparseMatrix matrix;
-    std::vector<int> target;          // per entry of W: its index in matrix, or -1
+    std::vector<int> source;          // per entry of matrix: the entry of W it copies
     std::vector<int> left_out, twin;  // W's entries left out; where each adds in matrix
   };
   CoveredCouplings covered_;
