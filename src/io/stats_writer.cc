@@ -27,7 +27,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 79 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 81 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -100,6 +100,8 @@ json statistics_object(const IntegratorStatistics& s) {
   j["krylov_stale_solves_abandoned"] = s.krylov_stale_solves_abandoned;
   j["single_precision_solves"] = s.single_precision_solves;
   j["single_precision_declined"] = s.single_precision_declined;
+  j["single_precision_factorizations"] = s.single_precision_factorizations;
+  j["chord_solves"] = s.chord_solves;
   j["factorizations_ladder"] = s.factorizations_ladder;
   j["recursive_factorizations"] = s.recursive_factorizations;
   j["factorizations_first"] = s.factorizations_first;

@@ -145,6 +145,7 @@ void CholmodSolver::analyze(const SparseMatrix& pattern) {
 void CholmodSolver::analyze_with_cholmod(const SparseMatrix& pattern) {
   free_factor_and_workspace();
   prepermuted_.active = false;
+  float_cholesky_ = FloatCholesky();
   // LL^T: CHOLMOD_AUTO lets cholmod_analyze pick simplicial when the ordered
   // pattern's flops per factor entry are below supernodal_switch (40): a banded
   // rope gives supernodes too thin for dense kernels to pay for their explicit
@@ -235,16 +236,73 @@ cholmod_sparse CholmodSolver::prepermuted_view() {
               prepermuted_.values.data(), -1);
 }
 
-bool CholmodSolver::factorize(const SparseMatrix& A) {
-  if (n_ < 0) throw std::logic_error("CholmodSolver::factorize called before analyze");
-  apply_blas_threads();  // this thread may not be the constructor's
+void CholmodSolver::check_pattern(const SparseMatrix& A, const char* who) const {
+  if (n_ < 0)
+    throw std::logic_error(std::string("CholmodSolver::") + who + " called before analyze");
   if (A.rows() != n_ || A.cols() != n_ || !A.isCompressed() ||
       A.nonZeros() != static_cast<Eigen::Index>(inner_.size()) ||
       !std::equal(outer_.begin(), outer_.end(), A.outerIndexPtr()) ||
       !std::equal(inner_.begin(), inner_.end(), A.innerIndexPtr())) {
-    throw std::invalid_argument(
-        "CholmodSolver::factorize: the matrix's pattern differs from the analyzed one");
+    throw std::invalid_argument(std::string("CholmodSolver::") + who +
+                                ": the matrix's pattern differs from the analyzed one");
   }
+}
+
+bool CholmodSolver::factorize_preconditioner(const SparseMatrix& A, bool if_definite) {
+  if (float_factorization_declined_ ||
+      !(mode_ == Mode::kLLT && prepermuted_.active && factor_ != nullptr && factor_->is_super)) {
+    return if_definite ? factorize_if_definite(A) : factorize(A);
+  }
+  check_pattern(A, "factorize_preconditioner");
+  apply_blas_threads();
+  const double* values = A.valuePtr();
+  if (!std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); })) {
+    return if_definite ? factorize_if_definite(A) : factorize(A);
+  }
+  const auto start = Clock::now();
+  if (!float_cholesky_.analyzed()) float_cholesky_.analyze(*factor_);
+  for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
+    prepermuted_.values[k] = values[prepermuted_.source[k]];
+  }
+  single_.values.resize(factor_->xsize);
+  const bool factored =
+      float_cholesky_.factorize(prepermuted_.outer.data(), prepermuted_.inner.data(),
+                                prepermuted_.values.data(), single_.values.data());
+  if (!factored) {
+    // Not definite in float. An exact Hessian (if_definite) is taken as
+    // indefinite: its caller has a definite matrix to factor instead.
+    // Otherwise double decides (and falls back where that fails too).
+    counters_.factorization_seconds += seconds_since(start);
+    if (!if_definite) return factorize(A);
+    ++counters_.factorizations;
+    factored_ = false;
+    return false;
+  }
+  ++counters_.factorizations;
+  ++counters_.single_precision_factorizations;
+  factored_ = true;
+  double_current_ = false;
+  single_.state = Single::State::kUnchecked;
+  counters_.factorization_seconds += seconds_since(start);
+  return true;
+}
+
+bool CholmodSolver::factor_double_now() {
+  const auto start = Clock::now();
+  cholmod_sparse header = prepermuted_view();
+  cholmod_factorize(&header, factor_, &common_);
+  if (common_.status < CHOLMOD_OK) {
+    throw std::runtime_error(cholmod_error("cholmod_factorize", common_.status));
+  }
+  counters_.factorization_seconds += seconds_since(start);
+  double_current_ = common_.status != CHOLMOD_NOT_POSDEF && factor_->minor >= factor_->n &&
+                    pivot_ratio_acceptable(cholmod_rcond(factor_, &common_), n_);
+  return double_current_;
+}
+
+bool CholmodSolver::factorize(const SparseMatrix& A) {
+  check_pattern(A, "factorize");
+  apply_blas_threads();  // this thread may not be the constructor's
   const auto start = Clock::now();
   const double analysis_seconds_before = counters_.analysis_seconds;
   ++counters_.factorizations;
@@ -253,6 +311,7 @@ bool CholmodSolver::factorize(const SparseMatrix& A) {
   const bool finite =
       std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); });
   factored_ = finite && factorize_with_fallback(A);
+  double_current_ = factored_;
   // A fallback's re-analysis is already in analysis_seconds.
   counters_.factorization_seconds +=
       seconds_since(start) - (counters_.analysis_seconds - analysis_seconds_before);
@@ -360,6 +419,14 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
     throw std::invalid_argument("CholmodSolver::solve: right-hand side has size " +
                                 std::to_string(b.size()) + ", expected " + std::to_string(n_));
   }
+  // After a float factorization: the double factor of the same values.
+  // (Float's pivot ratio test, n times its epsilon, is 1e9 times double's:
+  // what it passed, double passes.)
+  if (!double_current_ && !factor_double_now()) {
+    throw std::runtime_error(
+        "CholmodSolver::solve: the matrix factored in single precision is not definite in "
+        "double");
+  }
   const auto start = Clock::now();
   if (mode_ == Mode::kUmfpack) {
     umfpack_->solve(b, x);
@@ -412,12 +479,12 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
     return;
   }
   const auto start = Clock::now();
-  const bool check = single_.state == Single::State::kStale;
-  if (check) {
+  const bool float_factored = single_.state == Single::State::kUnchecked;
+  const bool check = single_.state == Single::State::kStale || float_factored;
+  if (single_.state == Single::State::kStale) {
     const double* values = static_cast<const double*>(factor_->x);
     single_.values.resize(factor_->xsize);
     for (size_t k = 0; k < factor_->xsize; ++k) single_.values[k] = static_cast<float>(values[k]);
-    single_.state = Single::State::kSingle;
     counters_.single_precision_setup_seconds += seconds_since(start);
   }
   const int* perm = prepermuted_.perm.data();
@@ -488,12 +555,18 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   if (residual > kSinglePrecisionResidual) {
     // W's condition times float's epsilon is not small: GMRES would need
     // products for the rounding alone. This factorization solves in double.
+    // A factor made in float can miss where the float copy of a double one
+    // does not (its rounding enters every elimination step, and the soft
+    // directions of a stiff matrix are differences of its stiff ones): where
+    // one does, this solver factors in double from then on.
     single_.state = Single::State::kDouble;
     ++counters_.single_precision_declined;
+    if (float_factored) float_factorization_declined_ = true;
     counters_.solve_seconds += seconds_since(start);
     solve(b, x);
     return;
   }
+  single_.state = Single::State::kSingle;  // checked
   if (x->size() != n_) x->resize(n_);
   for (int k = 0; k < n_; ++k) (*x)[perm[k]] = scale * y[k];
   ++counters_.solves;

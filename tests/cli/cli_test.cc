@@ -238,7 +238,26 @@ TEST_F(Cli, PreconditionerPrecisionIsChosenAndReported) {
   EXPECT_EQ(twice["integrator"]["preconditioner_precision"], "double");
   EXPECT_GT(single["statistics"]["krylov_iterations"].get<long>(), 0);
   EXPECT_EQ(single["statistics"]["single_precision_solves"].get<long>(),
-            single["statistics"]["krylov_iterations"].get<long>());
+            single["statistics"]["krylov_iterations"].get<long>() +
+                single["statistics"]["chord_solves"].get<long>());
+  // The Krylov path's preconditioners are factored in double, full
+  // Newton's (without the bend springs' couplings) in float unless asked.
+  EXPECT_EQ(single["statistics"]["single_precision_factorizations"].get<long>(), 0);
+  const std::string fresh = "run '" + kModels +
+                            "cloth.yaml' --t-final 0.1 --fixed-step "
+                            "--step 0.016666666666666666 --newton-solve fresh -q";
+  r = run(fresh + " --stats fresh_single.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run(fresh + " --preconditioner-precision double --stats fresh_double.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json fresh_single =
+      nlohmann::json::parse(read(dir_ / "fresh_single.json"))["statistics"];
+  const nlohmann::json fresh_double =
+      nlohmann::json::parse(read(dir_ / "fresh_double.json"))["statistics"];
+  EXPECT_GT(fresh_single["single_precision_factorizations"].get<long>(), 0);
+  EXPECT_EQ(fresh_single["single_precision_factorizations"].get<long>(),
+            fresh_single["covered_coupling_factorizations"].get<long>());
+  EXPECT_EQ(fresh_double["single_precision_factorizations"].get<long>(), 0);
   EXPECT_GT(twice["statistics"]["krylov_iterations"].get<long>(), 0);
   EXPECT_EQ(twice["statistics"]["single_precision_solves"].get<long>(), 0);
   r = run(common + " --preconditioner-precision half");

@@ -82,7 +82,7 @@ TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
   const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 60);
   // Supernodal: GMRES applied the factor in single precision.
   EXPECT_GT(st.single_precision_solves, 0);
-  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations);
+  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations + st.chord_solves);
   EXPECT_EQ(st.single_precision_declined, 0);
 }
 
@@ -109,7 +109,7 @@ TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(12, 1e6);
   const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
   EXPECT_GT(st.single_precision_solves, 0);
-  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations);
+  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations + st.chord_solves);
 }
 
 TEST(KrylovNewton, SmallSystemsWithAConstantMassMatrixGoSparse) {

@@ -17,6 +17,7 @@
 
 #include "stiffsim/linalg/cholmod_solver.h"
 #include "stiffsim/linalg/dense_solvers.h"
+#include "stiffsim/linalg/float_cholesky.h"
 #include "stiffsim/linalg/umfpack_solver.h"
 
 #if defined(__SSE2__)
@@ -518,6 +519,62 @@ TEST(CholmodSolverTest, SuiteSparseTimersAreNotRead) {
   cholmod_finish(&common);
 }
 
+// FloatCholesky on CHOLMOD's supernodal analysis (natural ordering, as
+// CholmodSolver analyzes its permuted matrix) against CHOLMOD's double
+// factor of the same matrix: entry by entry, within float's rounding of
+// an elimination (the factor's largest entry times a few hundred float
+// epsilons), and false for an indefinite matrix.
+TEST(FloatCholeskyTest, MatchesCholmodsDoubleFactor) {
+  for (int m : {12, 30}) {
+    SCOPED_TRACE(m);
+    const SparseMatrix A = cloth_matrix(m, 35);
+    const SparseMatrix lower = A.triangularView<Eigen::Lower>();
+    cholmod_common common;
+    cholmod_start(&common);
+    common.supernodal = CHOLMOD_SUPERNODAL;
+    common.nmethods = 1;
+    common.method[0].ordering = CHOLMOD_NATURAL;
+    common.postorder = false;
+    cholmod_sparse a{};
+    a.nrow = a.ncol = static_cast<std::size_t>(lower.rows());
+    a.nzmax = static_cast<std::size_t>(lower.nonZeros());
+    a.p = const_cast<int*>(lower.outerIndexPtr());
+    a.i = const_cast<int*>(lower.innerIndexPtr());
+    a.x = const_cast<double*>(lower.valuePtr());
+    a.stype = -1;
+    a.itype = CHOLMOD_INT;
+    a.xtype = CHOLMOD_REAL;
+    a.dtype = CHOLMOD_DOUBLE;
+    a.sorted = a.packed = 1;
+    cholmod_factor* factor = cholmod_analyze(&a, &common);
+    ASSERT_NE(factor, nullptr);
+    ASSERT_TRUE(factor->is_super);
+    FloatCholesky single;
+    single.analyze(*factor);
+    std::vector<float> L(factor->xsize);
+    ASSERT_TRUE(
+        single.factorize(lower.outerIndexPtr(), lower.innerIndexPtr(), lower.valuePtr(), L.data()));
+    ASSERT_TRUE(cholmod_factorize(&a, factor, &common));
+    ASSERT_EQ(common.status, CHOLMOD_OK);
+    const double* reference = static_cast<const double*>(factor->x);
+    double largest = 0.0, difference = 0.0;
+    for (std::size_t k = 0; k < factor->xsize; ++k) {
+      largest = std::max(largest, std::abs(reference[k]));
+      difference = std::max(difference, std::abs(reference[k] - L[k]));
+    }
+    EXPECT_GT(largest, 1.0);
+    EXPECT_LT(difference, 300 * std::numeric_limits<float>::epsilon() * largest);
+    // e_k^T A e_k < 0 on the same pattern: not definite.
+    SparseMatrix indefinite = lower;
+    const int k = static_cast<int>(lower.rows()) / 2;
+    indefinite.coeffRef(k, k) = -indefinite.coeff(k, k);
+    EXPECT_FALSE(single.factorize(indefinite.outerIndexPtr(), indefinite.innerIndexPtr(),
+                                  indefinite.valuePtr(), L.data()));
+    cholmod_free_factor(&factor, &common);
+    cholmod_finish(&common);
+  }
+}
+
 // factorize_if_definite() tries the LL^T alone: an indefinite matrix fails
 // it without a fallback or a word, and the solver keeps its LL^T for the
 // definite matrix a caller then factors instead (an integrator's exact
@@ -676,6 +733,73 @@ TEST(CholmodSolverTest, IllConditionedFactorPreconditionsInDouble) {
   EXPECT_GT((x_preconditioner - x).norm() / x.norm(), 1e-12);  // float's
   EXPECT_EQ(solver.counters().single_precision_declined, 1);
   EXPECT_EQ(solver.counters().single_precision_solves, 1);
+}
+
+// factorize_preconditioner() factors a supernodal LL^T in single
+// precision only (FloatCholesky): its preconditioner solves are float
+// ones, checked once against the matrix, and a double solve() factors the
+// same values in double first (once). Where the float factor misses
+// (stiffness a million times the mass term: in float the soft directions
+// are lost to the stiff ones' rounding), that factorization solves in
+// double and the solver factors in double from then on, while the float
+// copy of a double factor still serves the next well-conditioned matrix.
+// An indefinite matrix fails if_definite without a fallback.
+TEST(CholmodSolverTest, PreconditionerFactorsInSinglePrecisionUntilFloatMisses) {
+  const SparseMatrix A = cloth_matrix(40, 80);
+  CholmodSolver solver;
+  solver.analyze(A);
+  ASSERT_EQ(solver.method(), "cholmod-supernodal-llt");
+  const Eigen::VectorXd b = random_vector(A.rows(), 81);
+  Eigen::VectorXd x(A.rows()), x_single(A.rows());
+  ASSERT_TRUE(solver.factorize_preconditioner(A, false));
+  EXPECT_EQ(solver.counters().single_precision_factorizations, 1);
+  EXPECT_EQ(solver.counters().factorizations, 1);
+  for (int k = 0; k < 2; ++k) {
+    solver.solve_preconditioner(b, &x_single);
+    const double residual = relative_residual(A, x_single, b);
+    EXPECT_LT(residual, 1e-5);
+    EXPECT_GT(residual, 1e-10);  // float's
+  }
+  solver.solve(b, &x);
+  EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);  // double's
+  EXPECT_LT((x_single - x).norm() / x.norm(), 1e-4);
+  EXPECT_EQ(solver.counters().single_precision_solves, 2);
+
+  SparseMatrix identity(A.rows(), A.cols());
+  identity.setIdentity();
+  SparseMatrix stiff = 1e6 * (A - identity) + identity;  // the same pattern
+  stiff.makeCompressed();
+  ASSERT_TRUE(solver.factorize_preconditioner(stiff, false));
+  EXPECT_EQ(solver.counters().single_precision_factorizations, 2);
+  solver.solve_preconditioner(b, &x_single);
+  EXPECT_EQ(solver.counters().single_precision_declined, 1);
+  solver.solve(b, &x);
+  CholmodSolver reference;  // the double factorization of the same matrix
+  reference.analyze(A);
+  ASSERT_TRUE(reference.factorize(stiff));
+  Eigen::VectorXd x_reference(A.rows());
+  reference.solve(b, &x_reference);
+  EXPECT_LT((x - x_reference).norm(), 1e-12 * x_reference.norm());
+  EXPECT_LT((x_single - x_reference).norm(), 1e-12 * x_reference.norm());  // double's answer
+
+  ASSERT_TRUE(solver.factorize_preconditioner(A, false));
+  EXPECT_EQ(solver.counters().single_precision_factorizations, 2);  // double now
+  solver.solve_preconditioner(b, &x_single);
+  EXPECT_LT(relative_residual(A, x_single, b), 1e-5);
+  EXPECT_EQ(solver.counters().single_precision_solves, 3);  // the float copy's
+
+  SparseMatrix indefinite = A;
+  const int k = static_cast<int>(A.rows()) / 2;
+  indefinite.coeffRef(k, k) = -indefinite.coeff(k, k);
+  CholmodSolver fresh;
+  fresh.analyze(A);
+  testing::internal::CaptureStderr();
+  EXPECT_FALSE(fresh.factorize_preconditioner(indefinite, true));
+  EXPECT_EQ(testing::internal::GetCapturedStderr(), "");
+  EXPECT_EQ(fresh.method(), "cholmod-supernodal-llt");
+  EXPECT_THROW(fresh.solve(b, &x), std::logic_error);  // nothing factored
+  ASSERT_TRUE(fresh.factorize_preconditioner(A, true));
+  EXPECT_EQ(fresh.counters().single_precision_factorizations, 1);
 }
 
 // Right-hand sides far outside float's range (a Newton residual near its

@@ -377,15 +377,17 @@ class ImplicitIntegrator : public IntegratorBase {
   void compute_force_jacobians(double t, const Eigen::VectorXd& x);
   // Chooses, analyzes (once) and factors the iteration matrix of the current
   // solve, formed for step h; counts factorizations. Returns false if the
-  // matrix is singular.
+  // matrix is singular. preconditioner: the covered couplings may be left
+  // out; refined: that factor will precondition full Newton's refined
+  // solves only, and may be made in single precision.
   bool factor_iteration_matrix(const SparseMatrix& matrix, bool symmetric, double h,
-                               bool preconditioner = false);
+                               bool preconditioner = false, bool refined = false);
   // dx = A^-1 rhs with the current factorization; as a preconditioner
   // (GMRES), in the solver's single precision where it has one
   // (LinearSolver::solve_preconditioner). refine: a factor without the
   // covered couplings made for full Newton is refined to W's solve
-  // (solve_refined()); false: its own solve, in double (an estimate, as
-  // the chord test's).
+  // (solve_refined()); false: its own solve (an estimate, as the chord
+  // test's).
   void solve_iteration_matrix(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx,
                               bool preconditioner = false, bool refine = true);
   // dx = W^-1 rhs for a factor without the covered couplings: GMRES on the

@@ -161,6 +161,13 @@ struct IntegratorStatistics {
   // that their preconditioner solves ran in double.
   long single_precision_solves = 0;
   long single_precision_declined = 0;
+  // Factorizations without the covered couplings made in single precision
+  // only (LinearSolver::factorize_preconditioner).
+  long single_precision_factorizations = 0;
+  // The chord tests' solves (both paths): an estimate of the iterate's
+  // error with the last factorization, solved as GMRES's preconditioner
+  // solves are (in single precision where those are).
+  long chord_solves = 0;
   long factorizations_ladder = 0;      // the chord's reuse ladder and full Newton
   long factorizations_first = 0;       // no factorization yet, or one for another h (x4)
   long factorizations_cost_model = 0;  // GMRES time since the last one exceeded a factorization's

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "stiffsim/linalg/float_cholesky.h"
 #include "stiffsim/linalg/float_kernels.h"
 #include "stiffsim/linalg/linear_solver.h"
 #include "stiffsim/linalg/umfpack_solver.h"
@@ -53,6 +54,11 @@ class CholmodSolver final : public LinearSolver {
   bool has_cholesky() const override { return mode_ == Mode::kLLT; }
   // A failed attempt counts in counters().factorizations too.
   bool factorize_if_definite(const SparseMatrix& A) override;
+  // A supernodal LL^T is factored in single precision (FloatCholesky), the
+  // factor the float sweeps apply; where float finds A not definite, as
+  // factorize() (or factorize_if_definite()) in double. Counted in
+  // counters().single_precision_factorizations.
+  bool factorize_preconditioner(const SparseMatrix& A, bool if_definite) override;
   void solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
   void solve_preconditioner(const Eigen::VectorXd& b, Eigen::VectorXd* x) override;
   std::string method() const override;
@@ -76,6 +82,10 @@ class CholmodSolver final : public LinearSolver {
   bool prepermute(const SparseMatrix& pattern);
   // CHOLMOD's view of prepermuted_'s matrix.
   cholmod_sparse prepermuted_view();
+  void check_pattern(const SparseMatrix& A, const char* who) const;
+  // The double factor of the values factorize_preconditioner() factored in
+  // float, for a solve() (no fallback: float found them definite).
+  bool factor_double_now();
   // One numeric factorization in the current mode, taking the fallbacks.
   bool factorize_with_fallback(const SparseMatrix& A);
   void switch_mode(Mode next, const std::string& why);
@@ -99,6 +109,13 @@ class CholmodSolver final : public LinearSolver {
   // silently factor garbage.
   std::vector<int> outer_, inner_;
   bool factored_ = false;
+  // factor_ holds the last factorization in double (not where
+  // factorize_preconditioner() factored in float only).
+  bool double_current_ = false;
+  FloatCholesky float_cholesky_;  // analyzed at its first use
+  // A float factor's first solve missed by more than
+  // kSinglePrecisionResidual: factorize_preconditioner() factors in double.
+  bool float_factorization_declined_ = false;
   // The supernodal path: tril(P A P^T) in CHOLMOD's column form, each entry
   // taken from A's slot source[k] at every factorization; perm[k] is the
   // row of A that row k of it holds. Right-hand sides and solutions are
@@ -113,8 +130,9 @@ class CholmodSolver final : public LinearSolver {
   // from the factor at the first such solve after each factorization.
   struct Single {
     // kStale until the first preconditioner solve after a factorization,
-    // which checks the float solve's residual and leaves kSingle or kDouble.
-    enum class State { kStale, kSingle, kDouble } state = State::kStale;
+    // which checks the float solve's residual and leaves kSingle or kDouble;
+    // kUnchecked after a float factorization, until that check.
+    enum class State { kStale, kUnchecked, kSingle, kDouble } state = State::kStale;
     std::vector<float> values;
     Eigen::VectorXf y, gathered;
     Eigen::VectorXd residual;

@@ -29,6 +29,8 @@ struct LinearSolverCounters {
   // whose check of the float solve's residual sent them to double.
   long single_precision_solves = 0;
   long single_precision_declined = 0;
+  // factorize_preconditioner() calls factored in single precision only.
+  long single_precision_factorizations = 0;
   // The float copies of factors and their checks, within solve_seconds: a
   // cost of each factorization, paid at its first preconditioner solve.
   double single_precision_setup_seconds = 0.0;
@@ -65,6 +67,13 @@ class LinearSolver {
   virtual bool factorize_if_definite(const SparseMatrix& A) {
     (void)A;
     return false;
+  }
+  // Factorizes A for solve_preconditioner(), as factorize() (if_definite:
+  // as factorize_if_definite()), where the solver may keep the factor in
+  // single precision only (a supernodal LL^T); solve() then factors A in
+  // double first. For callers whose solves with A are a preconditioner's.
+  virtual bool factorize_preconditioner(const SparseMatrix& A, bool if_definite) {
+    return if_definite ? factorize_if_definite(A) : factorize(A);
   }
   // x = A^-1 b with the last factorization; allocates nothing once x has size
   // n and one solve has been done. x may not alias b. Throws std::logic_error
