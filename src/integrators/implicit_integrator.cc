@@ -1014,9 +1014,9 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       // Newton counts, iterates 10-18 tolerances from the root at most
       // against 14-22, --verify-roots, 3 starts each), and as GMRES's
       // preconditioner solves are: in single precision where those are
-      // (a float factor has no double one to solve with; a relative error
-      // of at most kSinglePrecisionResidual, 1e-3, in an estimate judged
-      // against 1 or 10 tolerances).
+      // (a float factor has no double one to solve with; its first solve
+      // missed by a relative residual of at most 1e-3, in an estimate
+      // judged against 1 or 10 tolerances).
       if (!chord_solved) {
         solve_iteration_matrix(r_, &chord_update_, true, false);
         ++stats_.chord_solves;

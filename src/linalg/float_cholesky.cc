@@ -43,7 +43,6 @@ void FloatCholesky::analyze(const cholmod_factor& symbolic) {
   head_.assign(nsuper_, -1);
   next_.assign(nsuper_, -1);
   position_.assign(nsuper_, 0);
-  factor_entries_ = static_cast<long>(symbolic.xsize);
   update_.assign(std::max<std::size_t>(symbolic.maxcsize, 1), 0.0f);
 }
 

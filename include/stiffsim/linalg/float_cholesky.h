@@ -38,11 +38,9 @@ class FloatCholesky {
   // largest squared pivot is at most n times double's epsilon (the
   // LinearSolver's "numerically singular"); L is then garbage.
   bool factorize(const int* outer, const int* inner, const double* values, float* L);
-  long factor_entries() const { return factor_entries_; }
 
  private:
   int n_ = -1, nsuper_ = 0;
-  long factor_entries_ = 0;
   std::vector<int> super_, pi_, px_, rows_;
   std::vector<int> super_of_;  // column -> its supernode
   // Workspace of the numeric phase: each row's place in the current
