@@ -36,6 +36,12 @@ double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+// CHOLMOD does not test for NaN/Inf: it would return a factor full of NaN.
+bool all_finite(const SparseMatrix& A) {
+  const double* values = A.valuePtr();
+  return std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); });
+}
+
 std::string cholmod_error(const char* call, int status) {
   return std::string("CholmodSolver: ") + call + " failed with CHOLMOD status " +
          std::to_string(status);
@@ -230,6 +236,13 @@ bool CholmodSolver::prepermute(const SparseMatrix& pattern) {
   return true;
 }
 
+void CholmodSolver::gather_prepermuted(const SparseMatrix& A) {
+  const double* values = A.valuePtr();
+  for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
+    prepermuted_.values[k] = values[prepermuted_.source[k]];
+  }
+}
+
 cholmod_sparse CholmodSolver::prepermuted_view() {
   // Lower (stype -1): the natural ordering's form that needs no transpose.
   return view(n_, prepermuted_.inner.size(), prepermuted_.outer.data(), prepermuted_.inner.data(),
@@ -255,15 +268,10 @@ bool CholmodSolver::factorize_preconditioner(const SparseMatrix& A, bool if_defi
   }
   check_pattern(A, "factorize_preconditioner");
   apply_blas_threads();
-  const double* values = A.valuePtr();
-  if (!std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); })) {
-    return if_definite ? factorize_if_definite(A) : factorize(A);
-  }
+  if (!all_finite(A)) return if_definite ? factorize_if_definite(A) : factorize(A);
   const auto start = Clock::now();
   if (!float_cholesky_.analyzed()) float_cholesky_.analyze(*factor_);
-  for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
-    prepermuted_.values[k] = values[prepermuted_.source[k]];
-  }
+  gather_prepermuted(A);
   single_.values.resize(factor_->xsize);
   const bool factored =
       float_cholesky_.factorize(prepermuted_.outer.data(), prepermuted_.inner.data(),
@@ -306,11 +314,7 @@ bool CholmodSolver::factorize(const SparseMatrix& A) {
   const auto start = Clock::now();
   const double analysis_seconds_before = counters_.analysis_seconds;
   ++counters_.factorizations;
-  // CHOLMOD does not test for NaN/Inf: it would return a factor full of NaN.
-  const double* values = A.valuePtr();
-  const bool finite =
-      std::all_of(values, values + A.nonZeros(), [](double v) { return std::isfinite(v); });
-  factored_ = finite && factorize_with_fallback(A);
+  factored_ = all_finite(A) && factorize_with_fallback(A);
   double_current_ = factored_;
   // A fallback's re-analysis is already in analysis_seconds.
   counters_.factorization_seconds +=
@@ -333,10 +337,7 @@ bool CholmodSolver::factorize_with_fallback(const SparseMatrix& A) {
 
   cholmod_sparse header;
   if (prepermuted_.active) {
-    const double* values = A.valuePtr();
-    for (size_t k = 0; k < prepermuted_.source.size(); ++k) {
-      prepermuted_.values[k] = values[prepermuted_.source[k]];
-    }
+    gather_prepermuted(A);
     header = prepermuted_view();
   } else {
     // A permuted supernodal factorization reads the upper triangle with one
@@ -420,8 +421,8 @@ void CholmodSolver::solve(const Eigen::VectorXd& b, Eigen::VectorXd* x) {
                                 std::to_string(b.size()) + ", expected " + std::to_string(n_));
   }
   // After a float factorization: the double factor of the same values.
-  // (Float's pivot ratio test, n times its epsilon, is 1e9 times double's:
-  // what it passed, double passes.)
+  // (Float found them definite, with the same pivot-ratio bound; double's
+  // finer rounding fails only a matrix at the edge of definiteness.)
   if (!double_current_ && !factor_double_now()) {
     throw std::runtime_error(
         "CholmodSolver::solve: the matrix factored in single precision is not definite in "

@@ -80,6 +80,8 @@ class CholmodSolver final : public LinearSolver {
   // definition); false, with the factor left as it was, where the
   // reanalysis does not reproduce it.
   bool prepermute(const SparseMatrix& pattern);
+  // prepermuted_'s values from A's slots.
+  void gather_prepermuted(const SparseMatrix& A);
   // CHOLMOD's view of prepermuted_'s matrix.
   cholmod_sparse prepermuted_view();
   void check_pattern(const SparseMatrix& A, const char* who) const;
