@@ -183,10 +183,10 @@ void add_run_options(CLI::App* run, RunOptions* o) {
           ->group(newton);
   o->preconditioner_precision_option =
       run->add_option("--preconditioner-precision", o->preconditioner_precision,
-                      "GMRES's preconditioner solves on the Krylov path: single (default: a "
-                      "float copy of a supernodal factor, where its first solve after each "
-                      "factorization misses the matrix by at most 1e-3; double otherwise) or "
-                      "double")
+                      "GMRES's preconditioner solves: single (default: a float copy of a "
+                      "supernodal factor, where its first solve after each factorization "
+                      "misses the matrix by at most 1e-3; double otherwise; full Newton's "
+                      "factor without the covered couplings is made in float) or double")
           ->check(CLI::IsMember(preconditioner_precision_names()))
           ->group(newton);
   run->add_flag("--full-newton", o->full_newton,
