@@ -905,8 +905,8 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
         // |r| first; a monotone search cut it to alpha = 1/64 for 20
         // iterations. Measured on cloth.yaml at a fixed 1/60 for 2 s (three
         // runs each, the machine shared): 8-12 halvings and 1,093-1,152
-        // Newton iterations monotone, 1-4 and 952-1,054 with a memory of 3.
-        // A memory of 8 took 0.95-0.96x the time of 3 (kMeritMemory).
+        // Newton iterations monotone, 1-4 and 952-1,054 with a memory of 3
+        // (now kMeritMemory, which says why it is longer).
         const double reference =
             std::max(r_merit, *std::max_element(recent_merits.begin(), recent_merits.end()));
         accept = trial_merit <= (1.0 - 1e-4 * alpha) * reference;

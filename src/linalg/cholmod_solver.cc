@@ -262,13 +262,16 @@ void CholmodSolver::check_pattern(const SparseMatrix& A, const char* who) const 
 }
 
 bool CholmodSolver::factorize_preconditioner(const SparseMatrix& A, bool if_definite) {
+  // In double: a factor that is not a supernodal LL^T, a solver that went
+  // back to double, and values that are not finite (which the double path
+  // reports as a failed factorization).
   if (float_factorization_declined_ ||
-      !(mode_ == Mode::kLLT && prepermuted_.active && factor_ != nullptr && factor_->is_super)) {
+      !(mode_ == Mode::kLLT && prepermuted_.active && factor_ != nullptr && factor_->is_super) ||
+      !all_finite(A)) {
     return if_definite ? factorize_if_definite(A) : factorize(A);
   }
   check_pattern(A, "factorize_preconditioner");
   apply_blas_threads();
-  if (!all_finite(A)) return if_definite ? factorize_if_definite(A) : factorize(A);
   const auto start = Clock::now();
   if (!float_cholesky_.analyzed()) float_cholesky_.analyze(*factor_);
   gather_prepermuted(A);
