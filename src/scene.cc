@@ -28,6 +28,16 @@ SparseMatrix block_diagonal(const std::vector<std::unique_ptr<System>>& comps,
                             const std::vector<Dimensions>& offsets, int rows, int cols,
                             const std::function<const SparseMatrix&(const System&)>& get,
                             const std::function<std::pair<int, int>(const Dimensions&)>& at) {
+  // One component fills the whole matrix: its own pattern is the result
+  // (a merge of its 1.2 M entries took 0.1 s on the 100x100 sheet).
+  if (comps.size() == 1) {
+    const SparseMatrix& only = get(*comps[0]);
+    if (only.rows() == rows && only.cols() == cols && only.isCompressed()) {
+      SparseMatrix pattern = only;
+      std::fill(pattern.valuePtr(), pattern.valuePtr() + pattern.nonZeros(), 0.0);
+      return pattern;
+    }
+  }
   PatternBuilder b(rows, cols);
   for (size_t i = 0; i < comps.size(); ++i) {
     auto [r0, c0] = at(offsets[i]);

@@ -104,6 +104,39 @@ TEST(PatternBuilderTest, RejectsEntriesOutsideTheMatrix) {
   EXPECT_THROW(builder.add_block(2, 2, 2, 1), std::out_of_range);
 }
 
+TEST(ExpandBlocksTest, EqualsTheBuilderOfEveryBlock) {
+  // A random block pattern with empty block columns, expanded, against the
+  // same blocks added one entry at a time.
+  std::mt19937 rng(11);
+  std::bernoulli_distribution keep(0.35);
+  const int block_rows = 6, block_cols = 5, b = 3;
+  PatternBuilder blocks(block_rows, block_cols), entries(b * block_rows, b * block_cols);
+  for (int J = 0; J < block_cols; ++J) {
+    if (J == 2) continue;  // an empty block column
+    for (int I = block_rows - 1; I >= 0; --I) {
+      if (!keep(rng)) continue;
+      blocks.add(I, J);
+      entries.add_block(b * I, b * J, b, b);
+    }
+  }
+  const SparseMatrix expanded = expand_blocks(blocks.build(), b);
+  const SparseMatrix expected = entries.build();
+  expect_well_formed(expanded);
+  EXPECT_EQ(expanded.rows(), expected.rows());
+  EXPECT_EQ(expanded.cols(), expected.cols());
+  ASSERT_EQ(expanded.nonZeros(), expected.nonZeros());
+  EXPECT_GT(expanded.nonZeros(), 0);
+  for (int j = 0; j <= expected.cols(); ++j) {
+    EXPECT_EQ(expanded.outerIndexPtr()[j], expected.outerIndexPtr()[j]) << "column " << j;
+  }
+  for (int k = 0; k < expected.nonZeros(); ++k) {
+    EXPECT_EQ(expanded.innerIndexPtr()[k], expected.innerIndexPtr()[k]) << "slot " << k;
+    EXPECT_EQ(expanded.valuePtr()[k], 0.0);
+  }
+  EXPECT_EQ(expand_blocks(PatternBuilder(2, 2).build(), 4).nonZeros(), 0);
+  EXPECT_THROW(expand_blocks(blocks.build(), 0), std::invalid_argument);
+}
+
 TEST(SlotOfTest, FindsEveryEntryAndRejectsMissingOnes) {
   std::mt19937 rng(7);
   std::bernoulli_distribution keep(0.3);

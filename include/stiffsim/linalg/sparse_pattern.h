@@ -30,6 +30,13 @@ class PatternBuilder {
   std::vector<std::pair<int, int>> entries_;  // (col, row), in the order added
 };
 
+// The pattern of dense b x b blocks, one in place of each entry of
+// `blocks` (entry (I, J) becomes rows b I .. b I + b - 1 of columns b J ..
+// b J + b - 1), with explicit zeros. Where a pattern is made of blocks
+// (three velocities per particle), the blocks' pattern is built with
+// b^2 times fewer entries to collect and sort.
+SparseMatrix expand_blocks(const SparseMatrix& blocks, int b);
+
 // Index into A.valuePtr() of entry (row, col); throws std::out_of_range if
 // (row, col) is not in the pattern.
 int slot_of(const SparseMatrix& A, int row, int col);
