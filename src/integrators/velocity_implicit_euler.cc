@@ -6,6 +6,7 @@
 
 #include "stiffsim/error.h"
 #include "stiffsim/integrators/wall_clock.h"
+#include "stiffsim/linalg/sparse_pattern.h"
 #include "stiffsim/linalg/sparse_products.h"
 
 namespace stiffsim {
@@ -81,16 +82,27 @@ void VelocityImplicitEuler::do_initialize() {
   // One pattern for the whole Newton matrix, built once per run: the union
   // of M, D, K N and the z blocks, plus the diagonal (identity of the z rows,
   // or of everything in the generic form).
-  PatternBuilder b(d.ny(), d.ny());
-  b.add_pattern(system_.mass_matrix_pattern());
-  b.add_pattern(J.dF_dv);
-  b.add_pattern(K_or_KN);
-  b.add_pattern(J.dF_dz, 0, d.nv);
-  b.add_pattern(J.dfz_dv, d.nv, 0);
-  b.add_pattern(Zq_or_ZqN, d.nv, 0);
-  b.add_pattern(J.dfz_dz, d.nv, d.nv);
-  b.add_diagonal(0, d.ny());
-  iteration_matrix_ = b.build();
+  // Where D and K share one pattern that holds M and the diagonal (a
+  // particle system's: each spring's 3x3 blocks in both), that pattern is
+  // the union already, with its rows sorted as build() sorts them; building
+  // it again took 0.2 s of the 100x100 sheet's set-up (3.5 M entries
+  // collected and sorted).
+  if (d.nz == 0 && same_pattern(J.dF_dv, K_or_KN) &&
+      holds_pattern(K_or_KN, system_.mass_matrix_pattern(), true)) {
+    iteration_matrix_ = K_or_KN;
+    set_zero_keep_pattern(&iteration_matrix_);
+  } else {
+    PatternBuilder b(d.ny(), d.ny());
+    b.add_pattern(system_.mass_matrix_pattern());
+    b.add_pattern(J.dF_dv);
+    b.add_pattern(K_or_KN);
+    b.add_pattern(J.dF_dz, 0, d.nv);
+    b.add_pattern(J.dfz_dv, d.nv, 0);
+    b.add_pattern(Zq_or_ZqN, d.nv, 0);
+    b.add_pattern(J.dfz_dz, d.nv, d.nv);
+    b.add_diagonal(0, d.ny());
+    iteration_matrix_ = b.build();
+  }
 
   slots_M_ = slots_in(iteration_matrix_, system_.mass_matrix_pattern());
   slots_D_ = slots_in(iteration_matrix_, J.dF_dv);

@@ -180,6 +180,31 @@ void scatter_add(const SparseMatrix& part, const std::vector<int>& slots, double
   for (std::size_t k = 0; k < count; ++k) target[slots[k]] += scale * values[k];
 }
 
+bool same_pattern(const SparseMatrix& A, const SparseMatrix& B) {
+  if (A.rows() != B.rows() || A.cols() != B.cols() || !A.isCompressed() || !B.isCompressed() ||
+      A.nonZeros() != B.nonZeros()) {
+    return false;
+  }
+  return std::equal(A.outerIndexPtr(), A.outerIndexPtr() + A.outerSize() + 1, B.outerIndexPtr()) &&
+         std::equal(A.innerIndexPtr(), A.innerIndexPtr() + A.nonZeros(), B.innerIndexPtr());
+}
+
+bool holds_pattern(const SparseMatrix& whole, const SparseMatrix& part, bool with_diagonal) {
+  if (part.rows() > whole.rows() || part.cols() > whole.cols()) return false;
+  if (with_diagonal) {
+    if (whole.rows() != whole.cols()) return false;
+    for (int j = 0; j < whole.cols(); ++j) {
+      if (find_slot(whole, j, j) < 0) return false;
+    }
+  }
+  for (int j = 0; j < part.outerSize(); ++j) {
+    for (SparseMatrix::InnerIterator it(part, j); it; ++it) {
+      if (find_slot(whole, static_cast<int>(it.row()), j) < 0) return false;
+    }
+  }
+  return true;
+}
+
 bool is_structurally_symmetric(const SparseMatrix& A) {
   if (A.rows() != A.cols()) return false;
   for (int j = 0; j < A.outerSize(); ++j) {

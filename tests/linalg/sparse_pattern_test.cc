@@ -245,5 +245,79 @@ TEST(StructuralSymmetryTest, ComparesPatternsNotValues) {
   EXPECT_FALSE(is_structurally_symmetric(PatternBuilder(2, 3).build()));
 }
 
+// same_pattern and holds_pattern decide whether a set-up may take one
+// pattern as the union of several (VelocityImplicitEuler's Newton matrix):
+// checked here against the builder's union and against dense masks.
+TEST(SamePatternTest, ComparesPositionsNotValues) {
+  PatternBuilder builder(4, 4);
+  builder.add(0, 0);
+  builder.add(2, 1);
+  builder.add(3, 3);
+  SparseMatrix a = builder.build();
+  SparseMatrix b = builder.build();
+  b.coeffRef(2, 1) = 5.0;  // values differ: the pattern is the same
+  EXPECT_TRUE(same_pattern(a, b));
+
+  builder.add(1, 2);
+  EXPECT_FALSE(same_pattern(a, builder.build()));  // one entry more
+  PatternBuilder moved(4, 4);                      // as many entries, one of them elsewhere
+  moved.add(0, 0);
+  moved.add(1, 1);
+  moved.add(3, 3);
+  EXPECT_FALSE(same_pattern(a, moved.build()));
+  EXPECT_FALSE(same_pattern(a, PatternBuilder(4, 5).build()));
+  SparseMatrix uncompressed = a;
+  uncompressed.uncompress();
+  EXPECT_FALSE(same_pattern(a, uncompressed));
+}
+
+TEST(HoldsPatternTest, AgreesWithTheBuildersUnionOnRandomPatterns) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> index(0, 11);
+  std::bernoulli_distribution coin(0.5);
+  int unions = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    PatternBuilder whole_builder(12, 12), part_builder(12, 12);
+    std::vector<std::pair<int, int>> added;
+    for (int k = 0; k < 40; ++k) {
+      added.emplace_back(index(rng), index(rng));
+      whole_builder.add(added.back().first, added.back().second);
+    }
+    // Half of the parts are drawn from the whole's own entries (a subset
+    // but for the diagonal), the others anywhere (rarely a subset).
+    const bool from_whole = coin(rng);
+    std::uniform_int_distribution<int> pick(0, static_cast<int>(added.size()) - 1);
+    for (int k = 0; k < 6; ++k) {
+      if (from_whole) {
+        const auto [row, col] = added[pick(rng)];
+        part_builder.add(row, col);
+      } else {
+        part_builder.add(index(rng), index(rng));
+      }
+    }
+    if (coin(rng)) part_builder.add(index(rng), index(rng));  // maybe outside
+    if (coin(rng)) whole_builder.add_diagonal(0, 12);
+    const SparseMatrix whole = whole_builder.build(), part = part_builder.build();
+    const Mask w = mask_of(whole), p = mask_of(part);
+    const bool expected_part = (p.array() <= w.array()).all();
+    const bool expected_diagonal = w.diagonal().all();
+    EXPECT_EQ(holds_pattern(whole, part, false), expected_part) << "trial " << trial;
+    EXPECT_EQ(holds_pattern(whole, part, true), expected_part && expected_diagonal)
+        << "trial " << trial;
+    // Where the whole holds both, it is their union, position for position.
+    if (expected_part && expected_diagonal) {
+      PatternBuilder union_builder(12, 12);
+      union_builder.add_pattern(whole);
+      union_builder.add_pattern(part);
+      union_builder.add_diagonal(0, 12);
+      EXPECT_TRUE(same_pattern(whole, union_builder.build())) << "trial " << trial;
+      ++unions;
+    }
+  }
+  EXPECT_GE(unions, 20);  // the union case was exercised, not only refusals
+  EXPECT_FALSE(holds_pattern(PatternBuilder(3, 3).build(), PatternBuilder(4, 4).build(), false));
+  EXPECT_FALSE(holds_pattern(PatternBuilder(3, 4).build(), PatternBuilder(3, 4).build(), true));
+}
+
 }  // namespace
 }  // namespace stiffsim

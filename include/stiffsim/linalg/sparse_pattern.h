@@ -57,6 +57,14 @@ void scatter_add(const SparseMatrix& part, const std::vector<int>& slots, double
 void multiply_into_pattern(const SparseMatrix& A, const SparseMatrix& B, SparseMatrix* C,
                            std::vector<int>* marker);
 
+// Whether A and B store the same positions in the same order (values not
+// compared): both compressed, of one size, with equal index arrays.
+bool same_pattern(const SparseMatrix& A, const SparseMatrix& B);
+
+// Whether `whole` stores every position `part` stores, and with
+// with_diagonal every diagonal position too (square `whole`).
+bool holds_pattern(const SparseMatrix& whole, const SparseMatrix& part, bool with_diagonal);
+
 // True when A has the same pattern as its transpose (values not compared).
 bool is_structurally_symmetric(const SparseMatrix& A);
 
