@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "stiffsim/error.h"
+#include "stiffsim/linalg/sparse_pattern.h"
 #include "stiffsim/structured_newton_matrix.h"
 
 namespace stiffsim {
@@ -34,7 +35,7 @@ SparseMatrix block_diagonal(const std::vector<std::unique_ptr<System>>& comps,
     const SparseMatrix& only = get(*comps[0]);
     if (only.rows() == rows && only.cols() == cols && only.isCompressed()) {
       SparseMatrix pattern = only;
-      std::fill(pattern.valuePtr(), pattern.valuePtr() + pattern.nonZeros(), 0.0);
+      set_zero_keep_pattern(&pattern);
       return pattern;
     }
   }

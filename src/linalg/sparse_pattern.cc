@@ -123,7 +123,7 @@ SparseMatrix expand_blocks(const SparseMatrix& blocks, int b) {
       outer[b * J + c + 1] = k;
     }
   }
-  std::fill(A.valuePtr(), A.valuePtr() + k, 0.0);
+  set_zero_keep_pattern(&A);
   return A;
 }
 
