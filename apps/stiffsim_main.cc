@@ -176,9 +176,10 @@ void add_run_options(CLI::App* run, RunOptions* o) {
   o->newton_tolerance_option =
       run->add_option("--newton-tolerance", o->newton_tolerance,
                       "What sets the Newton tolerance of VIE's fixed steps without "
-                      "--error-estimate: step-error (default: 0.05 times the larger of the "
-                      "accuracy and the step's own local error, at most 100 times the accuracy) "
-                      "or accuracy (0.05 times the accuracy, as under error control)")
+                      "--error-estimate: step-error (default: 0.1 times the step's own local "
+                      "error, counted up to 100 times the accuracy, where it exceeds the "
+                      "accuracy; 0.05 times the accuracy otherwise) or accuracy (0.05 times the "
+                      "accuracy, as under error control)")
           ->check(CLI::IsMember(newton_tolerance_names()))
           ->group(newton);
   o->preconditioner_precision_option =

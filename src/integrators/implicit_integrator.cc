@@ -87,6 +87,9 @@ ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings 
   if (!(implicit_.newton_kappa > 0.0 && implicit_.newton_kappa < 1.0)) {
     throw InputError("newton_kappa must be in (0, 1)");
   }
+  if (!(implicit_.step_error_kappa > 0.0 && implicit_.step_error_kappa < 1.0)) {
+    throw InputError("step_error_kappa must be in (0, 1)");
+  }
   if (implicit_.max_krylov_iterations < 1) {
     throw InputError("max_krylov_iterations must be at least 1");
   }
@@ -1330,7 +1333,8 @@ bool ImplicitIntegrator::passes_energy_guard(double tf, double h, const Eigen::V
 void ImplicitIntegrator::use_step_error_tolerance(double local_error) {
   const bool widened = implicit_.step_error_tolerance && local_error > settings_.accuracy;
   const double error = std::min(local_error, kMaxToleranceWidening * settings_.accuracy);
-  newton_tolerance_ = implicit_.newton_kappa * (widened ? error : settings_.accuracy);
+  newton_tolerance_ =
+      widened ? implicit_.step_error_kappa * error : implicit_.newton_kappa * settings_.accuracy;
   if (widened) ++stats_.newton_tolerance_from_step_error;
 }
 

@@ -187,6 +187,17 @@ struct ImplicitSettings {
   // kappa * accuracy always (a solve to the accuracy, for comparisons with
   // the exact implicit Euler recursion).
   bool step_error_tolerance = true;
+  // The kappa of that widened tolerance: a solve's error at most this
+  // fraction of its step's own local error, as CVODE's nonlinear
+  // convergence coefficient (0.1 of the error its step's test allows).
+  // With 0.05 the folds of a falling sheet at 1/60 circled their nearly
+  // singular roots at updates of 1-4 tolerances for 10-40 iterations; on
+  // models/cloth.yaml at 1/60 to 0.5 s the trajectory's distance from the
+  // same steps solved to 0.0005 of their own error was alike at 0.05 and
+  // 0.1 (5e-5 to 7e-3 m, against 4e-3 to 0.12 m from steps 83 times
+  // smaller), at 0.78-0.89 the Newton iterations (README: "Newton tolerance at
+  // fixed steps").
+  double step_error_kappa = 0.1;
   // GMRES's preconditioner solves (the Krylov path) in single precision
   // where the factor is a supernodal LL^T whose float solve passes its
   // check (CholmodSolver::solve_preconditioner); false: in double always.
