@@ -192,11 +192,12 @@ class RootNear : public VelocityImplicitEuler {
   RootNear(const System& sys, double h)
       : VelocityImplicitEuler(sys, fixed(h, false, 1e-9), settings()) {}
 
-  Eigen::VectorXd solve(const State& start, double h, const Eigen::VectorXd& guess) {
+  // False where the iteration did not converge (its refactorings follow
+  // the run's timings, so on a loaded machine it sometimes runs out of
+  // its budget: 1-4 of 60 runs beside two busy processes).
+  bool solve(const State& start, double h, const Eigen::VectorXd& guess, Eigen::VectorXd* root) {
     initialize(start);
-    Eigen::VectorXd root;
-    EXPECT_TRUE(solve_step(start.t, h, start.x, guess, &root));
-    return root;
+    return solve_step(start.t, h, start.x, guess, root);
   }
 
  private:
@@ -227,15 +228,20 @@ double krylov_steps_against_roots(double accuracy, IntegratorStatistics* stats,
   VelocityImplicitEuler vie(*sys, fixed(h, false, accuracy), implicit);
   vie.initialize(sys->initial_state());
   double worst = 0.0;
+  int compared = 0;
   for (int step = 0; step < 15; ++step) {
     const State start = vie.state();
     vie.integrate_to(start.t + h);
     RootNear root(*sys, h);
-    const Eigen::VectorXd x = root.solve(start, h, vie.state().x);
+    Eigen::VectorXd x;
+    // A step whose reference did not converge has no root to compare with.
+    if (!root.solve(start, h, vie.state().x, &x)) continue;
+    ++compared;
     const double distance = (vie.state().x - x).lpNorm<Eigen::Infinity>();
     worst = std::max(worst, distance);
   }
   *stats = vie.statistics();
+  EXPECT_GE(compared, 12);
   EXPECT_EQ(stats->substep_failures, 0);
   // The steps move far more than the tolerance: the comparison means
   // something.
@@ -294,9 +300,10 @@ TEST(KrylovNewton, UpdateTestEndsSolvesNearTheRoot) {
       const long before = vie.statistics().krylov_update_convergences;
       vie.integrate_to(start.t + h);
       if (vie.statistics().krylov_update_convergences == before) continue;
-      ++ended;
       RootNear root(*sys, h);
-      const Eigen::VectorXd x = root.solve(start, h, vie.state().x);
+      Eigen::VectorXd x;
+      if (!root.solve(start, h, vie.state().x, &x)) continue;  // no reference
+      ++ended;
       EXPECT_LE((vie.state().x - x).lpNorm<Eigen::Infinity>(), 20.0 * tolerance)
           << "accuracy " << accuracy << ", step " << step;
     }
