@@ -106,6 +106,18 @@ ParticleSystem::ParticleSystem(ParticleDescription description) : desc_(std::mov
   for (size_t s = 0; s < desc_.springs.size(); ++s) {
     springs_.elements.emplace_back(desc_.springs[s], s, nodes, who);
   }
+  // The loops over the springs run in node order (by the lower node, then
+  // the higher), not in the description's: a mesh lists its springs by
+  // kind (stretch, shear, bend), and each kind's pass swept the whole of
+  // the Jacobians' values, 9.2 MB each on the 100x100 sheet, where in node
+  // order a spring's four blocks lie near the last one's.
+  std::stable_sort(springs_.elements.begin(), springs_.elements.end(),
+                   [](const SpringElement& x, const SpringElement& y) {
+                     const auto [xa, xb] = x.nodes();
+                     const auto [ya, yb] = y.nodes();
+                     return std::make_pair(std::min(xa, xb), std::max(xa, xb)) <
+                            std::make_pair(std::min(ya, yb), std::max(ya, yb));
+                   });
   for (int p : desc_.pinned) {
     if (p < 0 || p >= nodes) {
       fail(who, "pinned node " + std::to_string(p) + " out of range " + node_range(nodes));
