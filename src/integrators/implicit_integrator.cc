@@ -687,6 +687,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       refactor_due_ = true;
     }
     solve_excess_seconds_ = 0.0;
+    fresh_solve_products_ = 1.0;
   } else if (!full_newton) {
     if (refresh_matrices(t0, x0, h, trial) != Refresh::kProceed) return false;
     if (!iteration_matrix_factored()) return false;
@@ -1780,14 +1781,25 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
     refactor_failed_ = true;
     return true;
   }
-  // Cost model: the Krylov iterations beyond the first (with a fresh
-  // factorization one solve would have done) accumulate until they cost
-  // more than the last factorization did; then the next iteration
-  // refactors. A preconditioner that stays exact is never replaced.
-  krylov_excess_seconds_ += seconds * (krylov.iterations - 1) / krylov.iterations;
-  solve_excess_seconds_ += seconds * (krylov.iterations - 1) / krylov.iterations;
+  // Cost model: the Krylov iterations beyond those a fresh factorization
+  // takes accumulate until they cost more than the last factorization did;
+  // then the next iteration refactors. A preconditioner that stays exact is
+  // never replaced. What a fresh one takes is what this Newton solve's
+  // last one did (one product until it has made one): where a sheet folds
+  // its iterate's own factorization (the clamped matrix, whose Jacobian is
+  // indefinite there) left GMRES at 10-16 products, and charging those
+  // against one product refactored at every iteration for nothing.
+  if (preconditioner_fresh_) fresh_solve_products_ = krylov.iterations;
+  const double excess = stale_solve_excess(seconds, krylov.iterations, fresh_solve_products_);
+  krylov_excess_seconds_ += excess;
+  solve_excess_seconds_ += excess;
   if (krylov_excess_seconds_ > last_factorization_seconds_) refactor_due_ = true;
   return true;
+}
+
+double ImplicitIntegrator::stale_solve_excess(double seconds, int products, double fresh_products) {
+  if (products <= 0) return 0.0;
+  return seconds * std::max(0.0, products - std::max(fresh_products, 1.0)) / products;
 }
 
 void ImplicitIntegrator::add_estimator_share(const IntegratorStatistics& before,

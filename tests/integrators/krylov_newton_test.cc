@@ -335,6 +335,20 @@ TEST(KrylovNewton, CostModelKeepsAnExactPreconditioner) {
   EXPECT_EQ(st.iteration_matrix_factorizations, 1);
 }
 
+// The cost model charges a solve the products beyond those a fresh
+// factorization takes: all but one where none was measured, none where a
+// fresh one took as many or more (a sheet folding: its own factorization
+// left GMRES at 10-16 products, and refactoring saved nothing).
+TEST(KrylovNewton, CostModelChargesProductsBeyondAFreshSolves) {
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 1, 1.0), 0.0);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 10, 1.0), 0.9);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 10, 0.0), 0.9);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(2.0, 16, 12.0), 0.5);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 12, 12.0), 0.0);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 5, 12.0), 0.0);
+  EXPECT_DOUBLE_EQ(ImplicitIntegrator::stale_solve_excess(1.0, 0, 1.0), 0.0);
+}
+
 // A falling cloth at h = 1/60: the sheet's geometric stiffness moves at
 // every iterate, GMRES needs many products per solve against an old
 // factorization, and the cost model refactors.

@@ -216,6 +216,10 @@ class ImplicitIntegrator : public IntegratorBase {
   const ImplicitSettings& implicit_settings() const { return implicit_; }
   // Local extrapolation of the step-doubling pair: x_e = 2 x_small - x_big.
   bool extrapolating() const { return implicit_.extrapolate; }
+  // The Krylov path's cost model: the share of a GMRES solve's seconds
+  // spent on products beyond fresh_products (at least 1), those a fresh
+  // factorization takes; what a new factorization would save.
+  static double stale_solve_excess(double seconds, int products, double fresh_products);
 
  protected:
   enum class Convergence { kConverged, kDiverged, kNotYet };
@@ -704,6 +708,10 @@ class ImplicitIntegrator : public IntegratorBase {
   // the same 12, 0.24 s; at 1, 53 and 243.
   double solve_excess_seconds_ = 0.0;
   static constexpr double kStartRefactorShare = 0.3;
+  // The products the current Newton solve's last fresh preconditioner took
+  // (1 until it has made one): the cost model charges a solve only the
+  // products beyond them (stale_solve_excess).
+  double fresh_solve_products_ = 1.0;
   // Krylov solves left that take Eisenstat-Walker forcing after a failed
   // solve (newton()).
   int eisenstat_walker_solves_left_ = 0;
