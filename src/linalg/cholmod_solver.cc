@@ -489,6 +489,9 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
     const double* values = static_cast<const double*>(factor_->x);
     single_.values.resize(factor_->xsize);
     for (size_t k = 0; k < factor_->xsize; ++k) single_.values[k] = static_cast<float>(values[k]);
+  }
+  if (check) {
+    invert_single_diagonals();
     counters_.single_precision_setup_seconds += seconds_since(start);
   }
   const int* perm = prepermuted_.perm.data();
@@ -576,6 +579,20 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   ++counters_.solves;
   ++counters_.single_precision_solves;
   counters_.solve_seconds += seconds_since(start);
+}
+
+void CholmodSolver::invert_single_diagonals() {
+  const int* super = static_cast<const int*>(factor_->super);
+  const int* pi = static_cast<const int*>(factor_->pi);
+  const int* px = static_cast<const int*>(factor_->px);
+  for (size_t s = 0; s < factor_->nsuper; ++s) {
+    const int ncol = super[s + 1] - super[s], nrow = pi[s + 1] - pi[s];
+    float* block = single_.values.data() + px[s];
+    for (int j = 0; j < ncol; ++j) {
+      float& d = block[static_cast<long>(j) * nrow + j];
+      d = 1.0f / d;
+    }
+  }
 }
 
 double CholmodSolver::single_precision_residual(const Eigen::VectorXd& b, const int* perm,

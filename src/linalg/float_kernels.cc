@@ -16,15 +16,21 @@ using Block = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
 using Vector = Eigen::Map<Eigen::VectorXf>;
 using ConstVector = Eigen::Map<const Eigen::VectorXf>;
 
+// Column by column: the diagonal holds reciprocals, which Eigen's
+// triangular solves do not take.
 void lower_solve(int n, int ld, const float* L, float* y) {
-  const Block triangle(L, n, n, Eigen::OuterStride<>(ld));
-  Vector v(y, n);
-  triangle.triangularView<Eigen::Lower>().solveInPlace(v);
+  for (int j = 0; j < n; ++j) {
+    const float* column = L + static_cast<long>(j) * ld;
+    y[j] *= column[j];
+    Vector(y + j + 1, n - j - 1) -= y[j] * ConstVector(column + j + 1, n - j - 1);
+  }
 }
 void lower_transpose_solve(int n, int ld, const float* L, float* y) {
-  const Block triangle(L, n, n, Eigen::OuterStride<>(ld));
-  Vector v(y, n);
-  triangle.triangularView<Eigen::Lower>().transpose().solveInPlace(v);
+  for (int j = n - 1; j >= 0; --j) {
+    const float* column = L + static_cast<long>(j) * ld;
+    y[j] = (y[j] - ConstVector(column + j + 1, n - j - 1).dot(ConstVector(y + j + 1, n - j - 1))) *
+           column[j];
+  }
 }
 void product(int m, int n, int ld, const float* A, const float* x, float* y) {
   Vector(y, m).noalias() = Block(A, m, n, Eigen::OuterStride<>(ld)) * ConstVector(x, n);
@@ -133,22 +139,24 @@ STIFFSIM_AVX2 void transpose_product_subtract(int m, int n, int ld, const float*
 // The triangles go four columns at a time: a 4 x 4 triangle solved in
 // scalars, then one pass over the rest of the four columns. Column by
 // column they were a chain of short vector operations, each waiting on the
-// last, and took 27% of a solve's samples on the 100x100 sheet.
+// last, and took 27% of a solve's samples on the 100x100 sheet. The
+// diagonal holds reciprocals: the 4 x 4 triangles' chains of dependent
+// divisions held most of these two kernels' samples.
 STIFFSIM_AVX2 void lower_solve(int n, int ld, const float* L, float* y) {
   int j = 0;
   for (; j + 4 <= n; j += 4) {
     const auto [c0, c1, c2, c3] = four_columns(L + static_cast<long>(j) * ld, ld);
-    y[j] /= c0[j];
-    y[j + 1] = (y[j + 1] - c0[j + 1] * y[j]) / c1[j + 1];
-    y[j + 2] = (y[j + 2] - c0[j + 2] * y[j] - c1[j + 2] * y[j + 1]) / c2[j + 2];
+    y[j] *= c0[j];
+    y[j + 1] = (y[j + 1] - c0[j + 1] * y[j]) * c1[j + 1];
+    y[j + 2] = (y[j + 2] - c0[j + 2] * y[j] - c1[j + 2] * y[j + 1]) * c2[j + 2];
     y[j + 3] =
-        (y[j + 3] - c0[j + 3] * y[j] - c1[j + 3] * y[j + 1] - c2[j + 3] * y[j + 2]) / c3[j + 3];
+        (y[j + 3] - c0[j + 3] * y[j] - c1[j + 3] * y[j + 1] - c2[j + 3] * y[j + 2]) * c3[j + 3];
     const float w[4] = {-y[j], -y[j + 1], -y[j + 2], -y[j + 3]};
     add_four_columns(n - j - 4, ld, c0 + j + 4, w, y + j + 4);
   }
   for (; j < n; ++j) {
     const float* column = L + static_cast<long>(j) * ld;
-    y[j] /= column[j];
+    y[j] *= column[j];
     axpy(n - j - 1, -y[j], column + j + 1, y + j + 1);
   }
 }
@@ -159,15 +167,15 @@ STIFFSIM_AVX2 void lower_transpose_solve(int n, int ld, const float* L, float* y
   const int blocked = n - n % 4;
   for (int j = n - 1; j >= blocked; --j) {
     const float* column = L + static_cast<long>(j) * ld;
-    y[j] = (y[j] - dot(n - j - 1, column + j + 1, y + j + 1)) / column[j];
+    y[j] = (y[j] - dot(n - j - 1, column + j + 1, y + j + 1)) * column[j];
   }
   for (int j = blocked - 4; j >= 0; j -= 4) {
     const auto [c0, c1, c2, c3] = four_columns(L + static_cast<long>(j) * ld, ld);
     transpose_product_subtract(n - j - 4, 4, ld, c0 + j + 4, y + j + 4, y + j);
-    y[j + 3] /= c3[j + 3];
-    y[j + 2] = (y[j + 2] - c2[j + 3] * y[j + 3]) / c2[j + 2];
-    y[j + 1] = (y[j + 1] - c1[j + 2] * y[j + 2] - c1[j + 3] * y[j + 3]) / c1[j + 1];
-    y[j] = (y[j] - c0[j + 1] * y[j + 1] - c0[j + 2] * y[j + 2] - c0[j + 3] * y[j + 3]) / c0[j];
+    y[j + 3] *= c3[j + 3];
+    y[j + 2] = (y[j + 2] - c2[j + 3] * y[j + 3]) * c2[j + 2];
+    y[j + 1] = (y[j + 1] - c1[j + 2] * y[j + 2] - c1[j + 3] * y[j + 3]) * c1[j + 1];
+    y[j] = (y[j] - c0[j + 1] * y[j + 1] - c0[j + 2] * y[j + 2] - c0[j + 3] * y[j + 3]) * c0[j];
   }
 }
 

@@ -96,12 +96,18 @@ TEST_P(FloatKernels, TrianglesSolveAsInDouble) {
     const Block L = random_block(n, n, &rng_);
     const std::vector<float> b = random_vector(n, &rng_);
     const Eigen::MatrixXd Ld = dense(L);
+    // The kernels take the diagonal's reciprocals (float_kernels.h).
+    Block reciprocal = L;
+    for (int j = 0; j < n; ++j) {
+      float& d = reciprocal.values[static_cast<size_t>(j) * L.ld + j];
+      d = 1.0f / d;
+    }
     std::vector<float> y = b;
-    kernels_->lower_solve(n, L.ld, L.values.data(), y.data());
+    kernels_->lower_solve(n, L.ld, reciprocal.values.data(), y.data());
     const Eigen::VectorXd expected = Ld.triangularView<Eigen::Lower>().solve(to_double(b));
     EXPECT_LT(relative_error(y, expected), kFloatTolerance) << "n = " << n;
     y = b;
-    kernels_->lower_transpose_solve(n, L.ld, L.values.data(), y.data());
+    kernels_->lower_transpose_solve(n, L.ld, reciprocal.values.data(), y.data());
     const Eigen::VectorXd expected_t =
         Ld.triangularView<Eigen::Lower>().transpose().solve(to_double(b));
     EXPECT_LT(relative_error(y, expected_t), kFloatTolerance) << "n = " << n;

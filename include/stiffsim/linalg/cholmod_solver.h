@@ -135,6 +135,8 @@ class CholmodSolver final : public LinearSolver {
     // which checks the float solve's residual and leaves kSingle or kDouble;
     // kUnchecked after a float factorization, until that check.
     enum class State { kStale, kUnchecked, kSingle, kDouble } state = State::kStale;
+    // CHOLMOD's supernodal layout, with each diagonal entry replaced by its
+    // reciprocal at the first solve (the sweeps' kernels take them).
     std::vector<float> values;
     Eigen::VectorXf y, gathered;
     Eigen::VectorXd residual;
@@ -148,6 +150,8 @@ class CholmodSolver final : public LinearSolver {
   // solves miss by 1e-7 to 2e-4; W's condition times float's epsilon
   // beyond ~1e3 would not.
   static constexpr double kSinglePrecisionResidual = 1e-3;
+  // L_jj -> 1 / L_jj in single_.values (float_kernels.h).
+  void invert_single_diagonals();
   double single_precision_residual(const Eigen::VectorXd& b, const int* perm, double scale);
 };
 

@@ -11,9 +11,12 @@
 namespace stiffsim {
 
 struct FloatSweepKernels {
-  // y = L^-1 y for the n x n lower triangle of L.
+  // y = L^-1 y for the n x n lower triangle of L, whose diagonal holds the
+  // reciprocals 1 / L_jj (a multiplication instead of a division in each
+  // step's chain; CholmodSolver writes them).
   void (*lower_solve)(int n, int ld, const float* L, float* y);
-  // y = L^-T y for the n x n lower triangle of L.
+  // y = L^-T y for the n x n lower triangle of L, reciprocal diagonal as
+  // above.
   void (*lower_transpose_solve)(int n, int ld, const float* L, float* y);
   // y = A x for the m x n block A.
   void (*product)(int m, int n, int ld, const float* A, const float* x, float* y);
