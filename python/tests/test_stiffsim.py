@@ -191,8 +191,10 @@ def test_preconditioner_precision_is_an_option(models):
         sim = stiffsim.Simulator(scene, newton_solve="krylov", t_final=0.1, fixed_step=True,
                                  preconditioner_precision=precision)
         sim.advance_to()
-        counts[precision] = (sim.stats["krylov_iterations"] + sim.stats["chord_solves"],
-                             sim.stats["single_precision_solves"])
+        # GMRES solves that started from a chord test's solve saved one each.
+        solves = (sim.stats["krylov_iterations"] + sim.stats["chord_solves"]
+                  - sim.stats["krylov_chord_starts"])
+        counts[precision] = (solves, sim.stats["single_precision_solves"])
     assert counts["single"][0] > 0 and counts["single"][1] == counts["single"][0]
     assert counts["double"][0] > 0 and counts["double"][1] == 0
     with pytest.raises(stiffsim.InputError, match="unknown preconditioner precision 'half'"):

@@ -489,6 +489,22 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   ++stats_.linear_solves;
 }
 
+const LinearSolver& ImplicitIntegrator::current_solver() const {
+  const IterationMatrix& m = matrices_[active_];
+  return *(m.covered_active ? m.covered.solver : m.solver.solver);
+}
+
+bool ImplicitIntegrator::chord_starts_gmres(const Eigen::VectorXd& rhs) {
+  if (structured_ || chord_solver_ == nullptr || !iteration_matrix_factored()) return false;
+  const LinearSolver& solver = current_solver();
+  if (&solver != chord_solver_ || solver.counters().factorizations != chord_factorizations_ ||
+      rhs.size() != chord_residual_.size() || !(rhs + chord_residual_).isZero(0.0)) {
+    return false;
+  }
+  const Eigen::VectorXd& scale = residual_scaling();
+  return scale.size() == 0 || scale.maxCoeff() == scale.minCoeff();
+}
+
 void ImplicitIntegrator::solve_refined(const Eigen::VectorXd& rhs, Eigen::VectorXd* dx) {
   IterationMatrix& m = matrices_[active_];
   // W is symmetric (the covered couplings are left out of symmetric
@@ -551,7 +567,8 @@ void ImplicitIntegrator::initialize_newton(int unknowns) {
                              &second_derivative_previous_, &x_guess_}) {
     v->resize(nx);
   }
-  for (Eigen::VectorXd* v : {&r_, &dy_, &r_trial_, &chord_update_, &root_r_, &root_dy_}) {
+  for (Eigen::VectorXd* v :
+       {&r_, &dy_, &r_trial_, &chord_update_, &chord_residual_, &root_r_, &root_dy_}) {
     v->resize(unknowns);
   }
   root_x_.resize(nx);
@@ -1025,6 +1042,9 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       if (!chord_solved) {
         solve_iteration_matrix(r_, &chord_update_, true, false);
         ++stats_.chord_solves;
+        chord_residual_ = r_;
+        chord_solver_ = &current_solver();
+        chord_factorizations_ = chord_solver_->counters().factorizations;
       }
       chord_solved = true;
       return chord_within(1.0);
@@ -1621,7 +1641,19 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
     // rhs is minus the residual at x.
     *Ap = (r_product_ + rhs) / eps;
   };
-  auto precondition = [this](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+  // GMRES's first basis vector is rhs / |rhs| (a uniform scaling cancels):
+  // after a chord test at this iterate and factorization, its solve is
+  // -chord_update_ / |rhs|. Near a fold's root, where the chord test is
+  // tried, most Newton iterations would otherwise begin with that solve
+  // again.
+  bool chord_start = chord_starts_gmres(rhs);
+  auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+    if (chord_start) {
+      chord_start = false;
+      *z = chord_update_ * (-1.0 / rhs.norm());
+      ++stats_.krylov_chord_starts;
+      return;
+    }
     solve_iteration_matrix(r, z, true);
   };
   const auto start = WallClock::now();

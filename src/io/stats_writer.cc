@@ -27,7 +27,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 81 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 82 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -88,6 +88,7 @@ json statistics_object(const IntegratorStatistics& s) {
   j["krylov_failures"] = s.krylov_failures;
   j["krylov_chord_convergences"] = s.krylov_chord_convergences;
   j["krylov_update_convergences"] = s.krylov_update_convergences;
+  j["krylov_chord_starts"] = s.krylov_chord_starts;
   j["fresh_chord_tests"] = s.fresh_chord_tests;
   j["fresh_chord_convergences"] = s.fresh_chord_convergences;
   j["fresh_finishing_solves"] = s.fresh_finishing_solves;

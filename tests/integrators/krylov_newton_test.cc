@@ -82,7 +82,10 @@ TEST(KrylovNewton, ClothStepEqualsFreshDirectSolves) {
   const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 60);
   // Supernodal: GMRES applied the factor in single precision.
   EXPECT_GT(st.single_precision_solves, 0);
-  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations + st.chord_solves);
+  // Every product and chord test solved once, but a GMRES solve that
+  // started from the chord test's solve (krylov_chord_starts).
+  EXPECT_EQ(st.single_precision_solves,
+            st.krylov_iterations + st.chord_solves - st.krylov_chord_starts);
   EXPECT_EQ(st.single_precision_declined, 0);
 }
 
@@ -109,7 +112,11 @@ TEST(KrylovNewton, StiffClothStepEqualsFreshDirectSolves) {
   const auto sys = cloth(12, 1e6);
   const IntegratorStatistics st = expect_krylov_equals_fresh(Method::kVie, *sys, 1.0 / 240);
   EXPECT_GT(st.single_precision_solves, 0);
-  EXPECT_EQ(st.single_precision_solves, st.krylov_iterations + st.chord_solves);
+  // A chord test that did not end the solve started the next GMRES solve:
+  // the step still equals the fresh solves' (above).
+  EXPECT_GT(st.krylov_chord_starts, 0);
+  EXPECT_EQ(st.single_precision_solves,
+            st.krylov_iterations + st.chord_solves - st.krylov_chord_starts);
 }
 
 TEST(KrylovNewton, SmallSystemsWithAConstantMassMatrixGoSparse) {

@@ -765,6 +765,22 @@ class ImplicitIntegrator : public IntegratorBase {
   std::array<RememberedEnergy, 2> remembered_energy_;
   int next_remembered_ = 0;
   Eigen::VectorXd r_, dy_, dx_, x_trial_, r_trial_, x_prev_, predictor_qdot_, chord_update_;
+  // The chord test's solve, chord_update_ = P^-1 chord_residual_, and the
+  // factorization that made it (its solver and that solver's count).
+  // Where the next GMRES solve's right-hand side is -chord_residual_ and
+  // the factorization the same, its first preconditioned vector is that
+  // solve, scaled (chord_starts_gmres()).
+  Eigen::VectorXd chord_residual_;
+  const LinearSolver* chord_solver_ = nullptr;
+  long chord_factorizations_ = -1;
+  // The preconditioner solve_iteration_matrix(..., true) uses now.
+  const LinearSolver& current_solver() const;
+  // Whether newton_gmres may take -chord_update_ / |rhs| as its first
+  // preconditioned vector: rhs is -chord_residual_, the factorization is
+  // the chord's, and the residual's scaling (residual_scaling()) is a
+  // multiple of the identity, so that GMRES's first basis vector is
+  // rhs / |rhs|.
+  bool chord_starts_gmres(const Eigen::VectorXd& rhs);
 };
 
 }  // namespace stiffsim

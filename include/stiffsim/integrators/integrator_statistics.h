@@ -118,6 +118,10 @@ struct IntegratorStatistics {
   // Krylov-path iterates accepted by the update test: a full update, from a
   // GMRES solve that met its forcing, within the tolerance.
   long krylov_update_convergences = 0;
+  // GMRES solves that started from the chord test's solve at the same
+  // iterate and factorization instead of solving again (one preconditioner
+  // solve saved each).
+  long krylov_chord_starts = 0;
   // The same test in full Newton (the fresh factorization at the previous
   // iterate gives the next update): its solves, and the iterates it
   // accepted.
