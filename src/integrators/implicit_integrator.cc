@@ -1606,7 +1606,8 @@ void ImplicitIntegrator::compute_jacobian_at_iterate(double tf, double h, const 
 GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::VectorXd& x0,
                                              const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
                                              double forcing, double abandon_products,
-                                             Eigen::VectorXd* dy, double* seconds) {
+                                             Eigen::VectorXd* dy, double* seconds,
+                                             bool refactor_when_stale) {
   // The operator is the exact Jacobian of the residual, applied matrix-free
   // by a difference of residuals: one residual per product, O(n) like the
   // forces. The structured matrix leaves out the Jacobian terms of the
@@ -1666,13 +1667,25 @@ GmresResult ImplicitIntegrator::newton_gmres(double tf, double h, const Eigen::V
     if (k >= abandon_products || !(rel < 1.0)) return true;
     return k + k * std::log(forcing / rel) / std::log(rel) > abandon_products;
   };
+  // Where the solve is given up, the iterate's own factorization replaces
+  // the preconditioner (refactor_when_stale); its time is not the solve's.
+  double refactor_seconds = 0.0;
+  auto switch_preconditioner = [&] {
+    if (!refactor_when_stale) return false;
+    ++stats_.krylov_stale_solves_abandoned;
+    const auto refactor_start = WallClock::now();
+    const bool factored = refactor_preconditioner(tf, h, x0, x, FactorReason::kKrylovFailed);
+    refactor_seconds = seconds_since(refactor_start);
+    return factored;
+  };
   const double setup_before = preconditioner_setup_seconds_;
-  const GmresResult krylov = gmres(apply, precondition, rhs, residual_scaling(), forcing,
-                                   implicit_.max_krylov_iterations, &gmres_, dy, give_up);
+  const GmresResult krylov =
+      gmres(apply, precondition, rhs, residual_scaling(), forcing, implicit_.max_krylov_iterations,
+            &gmres_, dy, give_up, switch_preconditioner);
   const double elapsed = seconds_since(start);
-  stats_.krylov_seconds += elapsed;
+  stats_.krylov_seconds += elapsed - refactor_seconds;
   const double setup = preconditioner_setup_seconds_ - setup_before;
-  *seconds = elapsed - setup;
+  *seconds = elapsed - refactor_seconds - setup;
   last_factorization_seconds_ += setup;
   last_refactor_seconds_ += setup;
   if (krylov.iterations > 0) product_seconds_ = *seconds / krylov.iterations;
@@ -1754,36 +1767,41 @@ bool ImplicitIntegrator::finishing_direction(double tf, double h, const Eigen::V
   return g.converged;
 }
 
+bool ImplicitIntegrator::refactor_preconditioner(double tf, double h, const Eigen::VectorXd& x0,
+                                                 const Eigen::VectorXd& x, FactorReason reason) {
+  // The preconditioner: the definite (clamped, symmetric) matrix at this
+  // iterate, so a sparse Cholesky keeps working.
+  factor_reason_ = reason;
+  refactor_first_ = false;
+  preconditioner_fresh_ = true;
+  const auto start = WallClock::now();
+  compute_jacobian_at_iterate(tf, h, x0, x);
+  bool symmetric = false;
+  const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
+  const bool factored = factor_iteration_matrix(preconditioner, symmetric, h, covered_allowed_);
+  last_refactor_seconds_ = seconds_since(start);
+  return factored;
+}
+
 bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::VectorXd& x0,
                                           const Eigen::VectorXd& x, const Eigen::VectorXd& rhs,
                                           double forcing, bool may_abandon, Eigen::VectorXd* dy) {
   preconditioner_fresh_ = false;
-  auto refactor = [&](FactorReason reason) {
-    // The preconditioner: the definite (clamped, symmetric) matrix at this
-    // iterate, so a sparse Cholesky keeps working.
-    factor_reason_ = reason;
-    refactor_first_ = false;
-    preconditioner_fresh_ = true;
-    const auto start = WallClock::now();
-    compute_jacobian_at_iterate(tf, h, x0, x);
-    bool symmetric = false;
-    const SparseMatrix& preconditioner = form_iteration_matrix(h, &symmetric);
-    const bool factored = factor_iteration_matrix(preconditioner, symmetric, h, covered_allowed_);
-    last_refactor_seconds_ = seconds_since(start);
-    return factored;
-  };
   if (refactor_first_ || refactor_due_ || refactor_failed_ || !iteration_matrix_factored()) {
-    if (!refactor(refactor_failed_ ? FactorReason::kKrylovFailed
-                  : refactor_due_  ? FactorReason::kCostModel
-                                   : FactorReason::kFirst)) {
+    if (!refactor_preconditioner(tf, h, x0, x,
+                                 refactor_failed_ ? FactorReason::kKrylovFailed
+                                 : refactor_due_  ? FactorReason::kCostModel
+                                                  : FactorReason::kFirst)) {
       return false;
     }
   }
-  // A solve against a stale preconditioner is abandoned once the products
+  // A solve against a stale preconditioner is given up once the products
   // it still needs, at the rate it has shown, would cost more than
   // refactoring here (Jacobian, assembly, factorization) and a fresh
   // solve's few products; the preconditioner is then refactored at this
-  // iterate and the solve repeated. Where the sheet buckles, a
+  // iterate and the solve goes on with it (newton_gmres: the products
+  // made are kept, and the next direction is the fresh factorization's
+  // solve of the current residual). Where the sheet buckles, a
   // factorization one Newton iteration old often left GMRES at a relative
   // residual of 0.2-0.9 after all 40 products (the 100x100 cloth at 1/60:
   // 60 of its 237 solves to t = 0.25 s, 70 s in all), where the same
@@ -1797,12 +1815,10 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
     abandon_products = refactor_seconds / product_seconds_ + kFreshSolveProducts;
   }
   double seconds = 0.0;
-  GmresResult krylov = newton_gmres(tf, h, x0, x, rhs, forcing, abandon_products, dy, &seconds);
-  if (krylov.abandoned) {
-    ++stats_.krylov_stale_solves_abandoned;
-    if (!refactor(FactorReason::kKrylovFailed)) return false;
-    krylov = newton_gmres(tf, h, x0, x, rhs, forcing, 0.0, dy, &seconds);
-  }
+  const GmresResult krylov =
+      newton_gmres(tf, h, x0, x, rhs, forcing, abandon_products, dy, &seconds, true);
+  // Given up only where the refactoring it called for failed.
+  if (krylov.abandoned) return false;
   if (!krylov.converged) {
     // 40 products did not meet the tolerance: a stale preconditioner under
     // Eisenstat-Walker forcing (never abandoned), or even this iterate's
@@ -1821,8 +1837,14 @@ bool ImplicitIntegrator::krylov_direction(double tf, double h, const Eigen::Vect
   // its iterate's own factorization (the clamped matrix, whose Jacobian is
   // indefinite there) left GMRES at 10-16 products, and charging those
   // against one product refactored at every iteration for nothing.
-  if (preconditioner_fresh_) fresh_solve_products_ = krylov.iterations;
-  const double excess = stale_solve_excess(seconds, krylov.iterations, fresh_solve_products_);
+  // A solve whose preconditioner was replaced part way is charged nothing;
+  // its products since then are what a fresh one took.
+  const bool switched = krylov.switched_at >= 0;
+  if (preconditioner_fresh_) {
+    fresh_solve_products_ = switched ? krylov.iterations - krylov.switched_at : krylov.iterations;
+  }
+  const double excess =
+      switched ? 0.0 : stale_solve_excess(seconds, krylov.iterations, fresh_solve_products_);
   krylov_excess_seconds_ += excess;
   solve_excess_seconds_ += excess;
   if (krylov_excess_seconds_ > last_factorization_seconds_) refactor_due_ = true;

@@ -37,6 +37,78 @@ TEST(Gmres, ConvergesToItsTolerance) {
   EXPECT_NEAR(result.relative_residual, (b - Ax).norm() / b.norm(), 1e-12);
 }
 
+// Where give_up asks for it and switch_preconditioner() replaces the
+// preconditioner (here the identity by the exact inverse), the solve goes
+// on with the products made, and the new preconditioner's first input is
+// the current residual S (b - A x): checked against the residual of the
+// same solve abandoned at that point (the same Krylov space, the same x),
+// on a row-scaled system as on an unscaled one. With the exact inverse one
+// more product then ends the solve.
+TEST(Gmres, SwitchedPreconditionerSolvesTheCurrentResidual) {
+  const int n = 30;
+  const Diagonal A{Eigen::VectorXd::LinSpaced(n, 1.0, n)};
+  const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(n, 1.0, 2.0);
+  const Eigen::VectorXd scaled = Eigen::VectorXd::LinSpaced(n, 0.5, 3.0);
+  for (const Eigen::VectorXd& scale : {Eigen::VectorXd(), scaled}) {
+    auto give_up = [](int iterations, double) { return iterations == 4; };
+    GmresWorkspace ws;
+    Eigen::VectorXd x;
+    gmres(A, identity, b, scale, 1e-10, n, &ws, &x, give_up);
+    Eigen::VectorXd residual;
+    A(x, &residual);
+    residual = b - residual;
+    if (scale.size() == n) residual = residual.cwiseProduct(scale);
+    residual.normalize();
+
+    bool exact = false;
+    Eigen::VectorXd first_input;
+    auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+      if (!exact) {
+        *z = r;
+        return;
+      }
+      if (first_input.size() == 0) first_input = r;
+      // S A z = r: z = A^-1 S^-1 r.
+      *z = scale.size() == n ? r.cwiseQuotient(scale) : r;
+      *z = z->cwiseQuotient(A.d);
+    };
+    int switches = 0;
+    auto switch_preconditioner = [&] {
+      ++switches;
+      exact = true;
+      return true;
+    };
+    const GmresResult result =
+        gmres(A, precondition, b, scale, 1e-10, n, &ws, &x, give_up, switch_preconditioner);
+    EXPECT_EQ(switches, 1);
+    EXPECT_EQ(result.switched_at, 4);
+    EXPECT_FALSE(result.abandoned);
+    EXPECT_TRUE(result.converged);
+    EXPECT_EQ(result.iterations, 5);
+    ASSERT_EQ(first_input.size(), n);
+    EXPECT_NEAR(std::abs(first_input.normalized().dot(residual)), 1.0, 1e-10);
+    Eigen::VectorXd Ax;
+    A(x, &Ax);
+    EXPECT_LE((b - Ax).norm(), 1e-9 * b.norm());
+  }
+}
+
+// A switch that fails (the new factorization could not be made) abandons
+// the solve as give_up alone does.
+TEST(Gmres, FailedSwitchAbandonsTheSolve) {
+  const int n = 30;
+  const Diagonal A{Eigen::VectorXd::LinSpaced(n, 1.0, n)};
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(n);
+  GmresWorkspace ws;
+  Eigen::VectorXd x;
+  const GmresResult result = gmres(
+      A, identity, b, Eigen::VectorXd(), 1e-10, n, &ws, &x,
+      [](int iterations, double) { return iterations == 3; }, [] { return false; });
+  EXPECT_TRUE(result.abandoned);
+  EXPECT_EQ(result.switched_at, -1);
+  EXPECT_EQ(result.iterations, 3);
+}
+
 TEST(Gmres, GiveUpEndsTheSolveEarly) {
   const int n = 30;
   const Diagonal A{Eigen::VectorXd::LinSpaced(n, 1.0, n)};

@@ -531,9 +531,12 @@ class ImplicitIntegrator : public IntegratorBase {
   // current factorization (the structured matrix at x, or the Krylov path's
   // last assembled one). Counts the Krylov statistics; *seconds is its wall
   // time.
+  // With refactor_when_stale, a solve given up (abandon_products) goes on
+  // with the iterate's own factorization (refactor_preconditioner()); it
+  // is abandoned only where that fails.
   GmresResult newton_gmres(double tf, double h, const Eigen::VectorXd& x0, const Eigen::VectorXd& x,
                            const Eigen::VectorXd& rhs, double forcing, double abandon_products,
-                           Eigen::VectorXd* dy, double* seconds);
+                           Eigen::VectorXd* dy, double* seconds, bool refactor_when_stale = false);
   // ImplicitSettings::verify_roots: runs Newton on the exact Jacobian from
   // the accepted iterate x to the root and records x's distance from it in
   // the root_* statistics, leaving every other counter, and the cost
@@ -677,6 +680,9 @@ class ImplicitIntegrator : public IntegratorBase {
   // products) with the measured time of that factorization.
   // Why the next factorization happens, for the stats.
   enum class FactorReason { kLadder, kFirst, kCostModel, kKrylovFailed };
+  // The Krylov path's preconditioner, refactored at the iterate x.
+  bool refactor_preconditioner(double tf, double h, const Eigen::VectorXd& x0,
+                               const Eigen::VectorXd& x, FactorReason reason);
   FactorReason factor_reason_ = FactorReason::kLadder;
   bool newton_solve_chosen_ = false;
   bool krylov_ = false;

@@ -157,7 +157,8 @@ struct IntegratorStatistics {
   // iterate) abandoned because the products they still needed, at the rate
   // shown, would cost more than refactoring: the preconditioner was
   // refactored at the iterate (a factorizations_krylov_failed) and the
-  // solve repeated (both in krylov_solves; not in krylov_failures).
+  // solve went on with it, its products kept (one krylov_solve; not in
+  // krylov_failures).
   long krylov_stale_solves_abandoned = 0;
   // GMRES's preconditioner solves made in single precision (a supernodal
   // LL^T: CholmodSolver::solve_preconditioner), and factorizations whose

@@ -24,6 +24,9 @@ struct GmresWorkspace {
   Eigen::MatrixXd preconditioned;  // n x m: P^-1 times each, so x costs no extra solve
   Eigen::MatrixXd hessenberg;      // (m + 1) x m, triangularized in place by Givens rotations
   Eigen::VectorXd cosines, sines, rhs, coefficients, w, z;
+  // The current residual, and its coordinates in the basis, where the
+  // preconditioner changes (see gmres).
+  Eigen::VectorXd residual, residual_coefficients;
   // Grows only: a solve given a smaller budget of products than the last
   // (a stale preconditioner's, see ImplicitIntegrator) allocates nothing.
   void resize(Eigen::Index n, int m) {
@@ -33,8 +36,10 @@ struct GmresWorkspace {
     hessenberg.resize(m + 1, m);
     for (Eigen::VectorXd* v : {&cosines, &sines, &coefficients}) v->resize(m);
     rhs.resize(m + 1);
+    residual_coefficients.resize(m + 1);
     w.resize(n);
     z.resize(n);
+    residual.resize(n);
   }
 };
 
@@ -43,6 +48,7 @@ struct GmresResult {
   bool converged = false;          // |S (b - A x)| <= tolerance |S b| reached
   double relative_residual = 1.0;  // |S (b - A x)| / |S b| at exit
   bool abandoned = false;          // ended by give_up before max_iterations
+  int switched_at = -1;            // products before the preconditioner changed (see gmres)
 };
 
 // Solves A x = b from x = 0, minimizing |S (b - A x)|_2 over the Krylov
@@ -54,11 +60,16 @@ struct GmresResult {
 // and whose Jacobian is A, whenever it reduced that norm at all.
 // give_up(iterations, relative_residual), asked after every product that
 // left the solve short of its tolerance, may end it early (the result then
-// says abandoned).
-template <class Apply, class Precondition, class GiveUp>
+// says abandoned), unless switch_preconditioner() (asked then, once) says
+// it replaced the preconditioner: the solve then goes on with its basis
+// and products kept, the next direction the new preconditioner's solve of
+// the current residual (then of the Arnoldi vectors as before). A restart
+// would have thrown the products away and begun again from b.
+template <class Apply, class Precondition, class GiveUp, class Switch>
 GmresResult gmres(const Apply& apply, const Precondition& precondition, const Eigen::VectorXd& b,
                   const Eigen::VectorXd& scale, double relative_tolerance, int max_iterations,
-                  GmresWorkspace* ws, Eigen::VectorXd* x, const GiveUp& give_up) {
+                  GmresWorkspace* ws, Eigen::VectorXd* x, const GiveUp& give_up,
+                  const Switch& switch_preconditioner) {
   GmresResult result;
   const Eigen::Index n = b.size();
   x->setZero(n);
@@ -81,10 +92,16 @@ GmresResult gmres(const Apply& apply, const Precondition& precondition, const Ei
   ws->rhs.setZero();
   ws->rhs[0] = beta;
   int k = 0;  // columns of the basis in use beyond the first
+  bool residual_next = false;
   while (k < max_iterations) {
     // w = S A P^-1 v_k, orthogonalized against the basis (modified
     // Gram-Schmidt, once more where it lost most of its length).
-    ws->w = V.col(k);
+    if (residual_next) {
+      ws->w = ws->residual;
+      residual_next = false;
+    } else {
+      ws->w = V.col(k);
+    }
     precondition(ws->w, &ws->z);
     ws->preconditioned.col(k) = ws->z;
     apply(ws->z, &ws->w);
@@ -128,11 +145,32 @@ GmresResult gmres(const Apply& apply, const Precondition& precondition, const Ei
       break;
     }
     if (after == 0.0) break;  // the Krylov space is invariant: x is exact
-    if (k < max_iterations && give_up(result.iterations, result.relative_residual)) {
-      result.abandoned = true;
-      break;
+    bool switched = false;
+    if (k < max_iterations && result.switched_at < 0 &&
+        give_up(result.iterations, result.relative_residual)) {
+      if (!switch_preconditioner()) {
+        result.abandoned = true;
+        break;
+      }
+      result.switched_at = result.iterations;
+      switched = true;
     }
     V.col(k) = ws->w / after;
+    if (switched) {
+      // The scaled residual S (b - A x) = V_0..k Q^T (0, ..., 0, rhs[k]),
+      // Q the product of the rotations (Q H = R): that vector rotated
+      // back through them, the last first.
+      auto& q = ws->residual_coefficients;
+      q.head(k + 1).setZero();
+      q[k] = ws->rhs[k];
+      for (int i = k - 1; i >= 0; --i) {
+        q[i] = -ws->sines[i] * q[i + 1];
+        q[i + 1] *= ws->cosines[i];
+      }
+      ws->residual.noalias() = V.leftCols(k + 1) * q.head(k + 1);
+      ws->residual /= ws->residual.norm();
+      residual_next = true;
+    }
   }
   // y = H^-1 rhs (upper triangular k x k), x = P^-1 V y = Z y.
   for (int i = k - 1; i >= 0; --i) {
@@ -145,6 +183,13 @@ GmresResult gmres(const Apply& apply, const Precondition& precondition, const Ei
   return result;
 }
 
+template <class Apply, class Precondition, class GiveUp>
+GmresResult gmres(const Apply& apply, const Precondition& precondition, const Eigen::VectorXd& b,
+                  const Eigen::VectorXd& scale, double relative_tolerance, int max_iterations,
+                  GmresWorkspace* ws, Eigen::VectorXd* x, const GiveUp& give_up) {
+  return gmres(apply, precondition, b, scale, relative_tolerance, max_iterations, ws, x, give_up,
+               [] { return false; });
+}
 template <class Apply, class Precondition>
 GmresResult gmres(const Apply& apply, const Precondition& precondition, const Eigen::VectorXd& b,
                   const Eigen::VectorXd& scale, double relative_tolerance, int max_iterations,
