@@ -462,7 +462,7 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
     structured_->solve(rhs, *dx);
   } else {
     const IterationMatrix& m = matrices_[active_];
-    LinearSolver& solver = *(m.covered_active ? m.covered.solver : m.solver.solver);
+    LinearSolver& solver = current_solver();
     if (!preconditioner && m.refined && refine) {
       // Its preconditioner's solves count themselves; the products and
       // GMRES's own work are added here.
@@ -489,7 +489,7 @@ void ImplicitIntegrator::solve_iteration_matrix(const Eigen::VectorXd& rhs, Eige
   ++stats_.linear_solves;
 }
 
-const LinearSolver& ImplicitIntegrator::current_solver() const {
+LinearSolver& ImplicitIntegrator::current_solver() {
   const IterationMatrix& m = matrices_[active_];
   return *(m.covered_active ? m.covered.solver : m.solver.solver);
 }

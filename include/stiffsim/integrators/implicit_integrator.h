@@ -779,8 +779,9 @@ class ImplicitIntegrator : public IntegratorBase {
   Eigen::VectorXd chord_residual_;
   const LinearSolver* chord_solver_ = nullptr;
   long chord_factorizations_ = -1;
-  // The preconditioner solve_iteration_matrix(..., true) uses now.
-  const LinearSolver& current_solver() const;
+  // The factorization solve_iteration_matrix() solves with now (the one
+  // without the covered couplings where that is active).
+  LinearSolver& current_solver();
   // Whether newton_gmres may take -chord_update_ / |rhs| as its first
   // preconditioned vector: rhs is -chord_residual_, the factorization is
   // the chord's, and the residual's scaling (residual_scaling()) is a
