@@ -90,6 +90,9 @@ ImplicitIntegrator::ImplicitIntegrator(const System& system, IntegratorSettings 
   if (!(implicit_.step_error_kappa > 0.0 && implicit_.step_error_kappa < 1.0)) {
     throw InputError("step_error_kappa must be in (0, 1)");
   }
+  if (implicit_.direct_stall_updates < 0) {
+    throw InputError("direct_stall_updates must be at least 0 (0: never)");
+  }
   if (implicit_.max_krylov_iterations < 1) {
     throw InputError("max_krylov_iterations must be at least 1");
   }
@@ -789,7 +792,7 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
   // the size of the last finishing update.
   bool finishing = false, finishing_failed = false;
   double finishing_update = 0.0;
-  int stalled_updates = 0;  // Krylov updates in a row cut below kStalledStep
+  int stalled_updates = 0;  // updates in a row cut below the stall threshold
   bool polished = false;    // the tolerance cut for the energy guard (below)
   // Full Newton factors the exact Hessian of G near the root
   // (ImplicitSettings::exact_hessian_near_root). The clamped matrix on the
@@ -972,6 +975,14 @@ bool ImplicitIntegrator::newton(double t0, double h, const Eigen::VectorXd& x0,
       stalled_updates = alpha < kStalledStep ? stalled_updates + 1 : 0;
       if (stalled_updates == kStalledUpdates) {
         ++stats_.krylov_stalled_solves;
+        return false;
+      }
+    } else if (!full_newton && !structured && !last && implicit_.direct_stall_updates > 0) {
+      // The same for a direct trial that a rung follows: its old matrix
+      // misleads it (ImplicitSettings::direct_stall_updates).
+      stalled_updates = alpha < kDirectStalledStep ? stalled_updates + 1 : 0;
+      if (stalled_updates == implicit_.direct_stall_updates) {
+        ++stats_.direct_stalled_trials;
         return false;
       }
     }

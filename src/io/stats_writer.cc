@@ -27,7 +27,7 @@ json number(double value) { return std::isfinite(value) ? json(value) : json(nul
 // the struct must be added here too: the static_assert below stops the build
 // until it is, so the stats file never silently misses a counter.
 json statistics_object(const IntegratorStatistics& s) {
-  static_assert(sizeof(IntegratorStatistics) == 82 * 8,
+  static_assert(sizeof(IntegratorStatistics) == 83 * 8,
                 "IntegratorStatistics changed: update statistics_object()");
   json j;
   j["steps_taken"] = s.steps_taken;
@@ -95,6 +95,7 @@ json statistics_object(const IntegratorStatistics& s) {
   j["fresh_finishing_convergences"] = s.fresh_finishing_convergences;
   j["fresh_near_root_finishes"] = s.fresh_near_root_finishes;
   j["krylov_stalled_solves"] = s.krylov_stalled_solves;
+  j["direct_stalled_trials"] = s.direct_stalled_trials;
   j["largest_final_residual_ratio"] = number(s.largest_final_residual_ratio);
   j["krylov_rate_test_vetoes"] = s.krylov_rate_test_vetoes;
   j["krylov_eisenstat_walker_solves"] = s.krylov_eisenstat_walker_solves;

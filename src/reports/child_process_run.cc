@@ -94,7 +94,7 @@ class PayloadReader {
 // Every field of MethodRun but peak_resident_mb, which the parent measures.
 // A field added to MethodRun changes its size (here, libstdc++ on x86-64):
 // add it to both functions, then update the size.
-static_assert(sizeof(MethodRun) == 1616, "MethodRun changed: update write_run() and read_run()");
+static_assert(sizeof(MethodRun) == 1632, "MethodRun changed: update write_run() and read_run()");
 
 std::string write_run(const MethodRun& r) {
   PayloadWriter w;

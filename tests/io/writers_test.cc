@@ -185,7 +185,7 @@ TEST(StatsWriter, WritesEveryFieldAndNullForNaN) {
   EXPECT_EQ(j["nnz"]["iteration_matrix"], 36);
   EXPECT_EQ(j["wall_time_s"]["factorization"], 0.5);
   EXPECT_EQ(j["statistics"]["steps_taken"], 12);
-  EXPECT_EQ(j["statistics"].size(), 82u);  // every IntegratorStatistics field
+  EXPECT_EQ(j["statistics"].size(), 83u);  // every IntegratorStatistics field
   EXPECT_TRUE(j["statistics"]["smallest_adapted_step_size_taken"].is_null());
   EXPECT_EQ(j["skipped"][0], "N(q) products: N = I");
   EXPECT_EQ(j["energy"]["start"], 1.5);

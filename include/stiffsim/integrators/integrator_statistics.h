@@ -139,6 +139,10 @@ struct IntegratorStatistics {
   // Krylov solves given up because the line search cut kStalledUpdates
   // updates in a row to a small fraction (ImplicitIntegrator::newton()).
   long krylov_stalled_solves = 0;
+  // Direct trials given up for the next rung because the line search cut
+  // ImplicitSettings::direct_stall_updates updates in a row below
+  // kDirectStalledStep.
+  long direct_stalled_trials = 0;
   // The largest ratio, over the Newton solves that converged, of the final
   // iterate's residual (VIE: |r_i / m_i|, the velocity error bound where
   // W >= M) to that solve's tolerance; NaN where the method has no such
