@@ -528,12 +528,31 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   const float* values = single_.values.data();
   float* yp = y.data();
   float* tp = t.data();
+  // The entries [from, to) of the float factor, requested ahead of the
+  // sweep (kPrefetchAhead): each supernode requests as many entries as its
+  // own block holds, kPrefetchAhead beyond it in the sweep's direction.
+  // Into L2, not L1: requests into L1 held the fill buffers the sweep's own
+  // loads need. BM_SolvePreconditioner/100, medians of six alternated
+  // rounds: 6.0 ms without, 5.1 ms into L1, 4.6 ms into L2, 4.5 ms into
+  // L3 (a plain forward and backward pass over its 26 MB took 1.3-1.5
+  // ms). In the 100x100 sheet's run at 1/60 to 0.5 s: 2.5-2.7 ms per
+  // solve against 3.6-4.0 ms, and 0.82x the run time (4 alternated runs).
+  const long factor_size = static_cast<long>(single_.values.size());
+  const bool prefetching = factor_size * static_cast<long>(sizeof(float)) > kPrefetchFromBytes;
+  auto prefetch = [values, factor_size, prefetching](long from, long to) {
+    if (!prefetching) return;
+    constexpr long kLine = 64 / sizeof(float);
+    for (long k = std::max(from, 0L); k < std::min(to, factor_size); k += kLine) {
+      __builtin_prefetch(values + k, 0, 2);  // into L2: see kPrefetchAhead
+    }
+  };
   // L y = P b, supernode by supernode: the diagonal block's triangle, then
   // the rows below it.
   for (int s = 0; s < nsuper; ++s) {
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
     const float* L = values + px[s];
+    prefetch(px[s] + kPrefetchAhead, px[s + 1] + kPrefetchAhead);
     kernels.lower_solve(ncol, nrow, L, yp + k1);
     if (nbelow > 0) {
       kernels.product(nbelow, ncol, nrow, L + ncol, yp + k1, tp);
@@ -546,6 +565,7 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
     const int k1 = super[s], ncol = super[s + 1] - k1;
     const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
     const float* L = values + px[s];
+    prefetch(px[s] - kPrefetchAhead, px[s + 1] - kPrefetchAhead);
     if (nbelow > 0) {
       const int* below = rows + pi[s] + ncol;
       for (int i = 0; i < nbelow; ++i) tp[i] = yp[below[i]];
@@ -578,6 +598,7 @@ void CholmodSolver::solve_preconditioner(const Eigen::VectorXd& b, Eigen::Vector
   for (int k = 0; k < n_; ++k) (*x)[perm[k]] = scale * y[k];
   ++counters_.solves;
   ++counters_.single_precision_solves;
+  if (prefetching) ++counters_.prefetched_solves;
   counters_.solve_seconds += seconds_since(start);
 }
 

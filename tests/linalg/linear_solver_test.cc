@@ -481,6 +481,15 @@ TEST(CholmodSolverTest, ClothGridPatternPicksSupernodalLltAndSolves) {
   Eigen::VectorXd x(A.rows());
   solver.solve(b, &x);
   EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
+  // Its float factor (about 20 MB) is prefetched ahead of the sweeps; the
+  // solve is the double one to float rounding, as for a small factor
+  // (SupernodalPreconditionerSolvesInSinglePrecision).
+  Eigen::VectorXd x_single(A.rows());
+  solver.solve_preconditioner(b, &x_single);
+  EXPECT_EQ(solver.counters().single_precision_solves, 1);
+  EXPECT_EQ(solver.counters().prefetched_solves, 1);
+  EXPECT_LT(relative_residual(A, x_single, b), 1e-5);
+  EXPECT_LT((x_single - x).norm() / x.norm(), 1e-4);
 }
 
 // CHOLMOD's view of a lower triangle held by Eigen, for calling CHOLMOD
@@ -681,6 +690,7 @@ TEST(CholmodSolverTest, SupernodalPreconditionerSolvesInSinglePrecision) {
   EXPECT_EQ(solver.counters().solves, 6);
   EXPECT_EQ(solver.counters().single_precision_solves, 3);
   EXPECT_EQ(solver.counters().single_precision_declined, 0);
+  EXPECT_EQ(solver.counters().prefetched_solves, 0);  // a 4 MB float factor
 
   const SparseMatrix R = rope_matrix(400, 74);
   CholmodSolver simplicial;

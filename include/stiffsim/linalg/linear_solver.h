@@ -29,6 +29,9 @@ struct LinearSolverCounters {
   // whose check of the float solve's residual sent them to double.
   long single_precision_solves = 0;
   long single_precision_declined = 0;
+  // Single-precision solves that prefetched their factor (a large one:
+  // CholmodSolver::kPrefetchFromBytes).
+  long prefetched_solves = 0;
   // factorize_preconditioner() calls factored in single precision only.
   long single_precision_factorizations = 0;
   // The float copies of factors and their checks, within solve_seconds: a
