@@ -481,7 +481,8 @@ TEST(CholmodSolverTest, ClothGridPatternPicksSupernodalLltAndSolves) {
   Eigen::VectorXd x(A.rows());
   solver.solve(b, &x);
   EXPECT_LT(relative_residual(A, x, b), kResidualTolerance);
-  // Its float factor (about 20 MB) is prefetched ahead of the sweeps; the
+  // Its float factor (about 26 MB: the 100x100 sheet's pattern) is
+  // prefetched ahead of the sweeps (CholmodSolver::kPrefetchFromBytes); the
   // solve is the double one to float rounding, as for a small factor
   // (SupernodalPreconditionerSolvesInSinglePrecision).
   Eigen::VectorXd x_single(A.rows());
@@ -690,7 +691,7 @@ TEST(CholmodSolverTest, SupernodalPreconditionerSolvesInSinglePrecision) {
   EXPECT_EQ(solver.counters().solves, 6);
   EXPECT_EQ(solver.counters().single_precision_solves, 3);
   EXPECT_EQ(solver.counters().single_precision_declined, 0);
-  EXPECT_EQ(solver.counters().prefetched_solves, 0);  // a 4 MB float factor
+  EXPECT_EQ(solver.counters().prefetched_solves, 0);  // a float factor below 8 MB
 
   const SparseMatrix R = rope_matrix(400, 74);
   CholmodSolver simplicial;

@@ -152,8 +152,8 @@ class CholmodSolver final : public LinearSolver {
   static constexpr double kSinglePrecisionResidual = 1e-3;
   // The float sweeps prefetch the factor this many entries (4 KiB) ahead of
   // the supernode they work on: most supernodes of a sheet's factor are
-  // small blocks (about 1,300 of the 100x100 sheet's 1,800 have 8-15
-  // columns and some 85 rows), too short for the hardware's stream
+  // small blocks (1,273 of the 100x100 sheet's 1,771 have 8-15 columns
+  // and some 85 rows), too short for the hardware's stream
   // prefetcher to find before the sweep has moved on, and the sweeps ran
   // at a quarter of the speed of a plain pass over the same bytes (see
   // solve_preconditioner()). Only factors of more than kPrefetchFromBytes
