@@ -103,15 +103,28 @@ void solve_with_factor(benchmark::State& state, bool preconditioner) {
 void BM_Solve(benchmark::State& state) { solve_with_factor(state, false); }
 void BM_SolvePreconditioner(benchmark::State& state) { solve_with_factor(state, true); }
 
-// One evaluation of the force Jacobians K and D (the iteration matrix's
-// definite request, as full Newton asks for it) on a cloth lying in its rest
-// plane with every spring slightly stretched, so no branch is skipped.
-void BM_ForceJacobians(benchmark::State& state) {
-  const ParticleSystem sys = make_scene(state.range(0));
+// A cloth lying in its rest plane with every spring slightly stretched and
+// every node moving, so no branch of the force loops is skipped.
+State stretched_state(const ParticleSystem& sys) {
   State s = sys.initial_state();
   const Dimensions d = sys.dimensions();
   s.x.segment(0, d.nq) *= 1.001;
   s.x.segment(d.nq, d.nv).setConstant(0.1);
+  return s;
+}
+
+void count_springs(const ParticleSystem& sys, benchmark::State* state) {
+  state->counters["springs/s"] =
+      benchmark::Counter(static_cast<double>(sys.description().springs.size()),
+                         benchmark::Counter::kIsIterationInvariantRate);
+}
+
+// One evaluation of the force Jacobians K and D (the iteration matrix's
+// definite request, as full Newton asks for it).
+void BM_ForceJacobians(benchmark::State& state) {
+  const ParticleSystem sys = make_scene(state.range(0));
+  const State s = stretched_state(sys);
+  const Dimensions d = sys.dimensions();
   ForceJacobians J = sys.jacobian_pattern();
   JacobianRequest request;
   request.definite = true;
@@ -119,9 +132,21 @@ void BM_ForceJacobians(benchmark::State& state) {
     sys.force_jacobians(0.0, s.q(d), s.v(d), s.z(d), request, &J);
     benchmark::DoNotOptimize(J.dF_dq.valuePtr());
   }
-  state.counters["springs/s"] =
-      benchmark::Counter(static_cast<double>(sys.description().springs.size()),
-                         benchmark::Counter::kIsIterationInvariantRate);
+  count_springs(sys, &state);
+}
+
+// One evaluation of the forces, as each Krylov product of the Newton
+// iteration makes (ImplicitIntegrator::newton_gmres).
+void BM_Forces(benchmark::State& state) {
+  const ParticleSystem sys = make_scene(state.range(0));
+  const State s = stretched_state(sys);
+  const Dimensions d = sys.dimensions();
+  Eigen::VectorXd F(d.nv);
+  for (auto _ : state) {
+    sys.forces(0.0, s.q(d), s.v(d), s.z(d), F);
+    benchmark::DoNotOptimize(F.data());
+  }
+  count_springs(sys, &state);
 }
 
 // Fixed-step VIE (1 Newton solve per step, or 3 with the estimate) during
@@ -236,6 +261,7 @@ BENCHMARK(BM_FactorizePreconditioner)->Arg(32)->Arg(100)->Unit(benchmark::kMilli
 BENCHMARK(BM_Solve)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_SolvePreconditioner)->Arg(32)->Arg(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ForceJacobians)->Arg(32)->Arg(100)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_Forces)->Arg(32)->Arg(100)->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_VieStep)->Args({32, 0})->Args({32, 1})->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VieStep)->Args({100, 0})->Iterations(12)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_SheetTarget)->Iterations(8)->Unit(benchmark::kSecond);

@@ -13,6 +13,7 @@
 
 #include "stiffsim/model/force_element.h"
 #include "stiffsim/model/path.h"
+#include "stiffsim/model/spring_batch.h"
 #include "stiffsim/model/spring_element.h"
 #include "stiffsim/system.h"
 
@@ -154,6 +155,11 @@ class ParticleSystem : public System {
   // The force elements, one set per type, with their blocks' slots in the
   // Jacobian patterns.
   ElementSet<SpringElement> springs_;
+  // forces() adds the springs between two free nodes through the batch
+  // (spring_batch.h), the others (springs_.elements[i] for i in
+  // pinned_springs_) through their elements.
+  SpringBatch free_springs_;
+  std::vector<int> pinned_springs_;
   // Calls fn on every element set: the loops over forces, Jacobians,
   // energy and patterns are written once for every element type.
   template <typename Fn>
