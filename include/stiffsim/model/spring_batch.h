@@ -8,7 +8,7 @@
 //
 // Why: a Krylov product of the Newton iteration evaluates every force once
 // (ImplicitIntegrator::newton_gmres), and on the 100x100 sheet the spring
-// loop, one square root and one division per spring in a dependent chain,
+// loop, a square root and three divisions per spring one spring at a time,
 // was the largest single cost of a run (12% of its samples). The force is
 // SpringElement::force()'s, written once more on lanes:
 //   f_a = (k (l - L) + c (v_b - v_a).d / l) d / l,  f_b = -f_a,
@@ -26,7 +26,9 @@ class SpringBatch {
  public:
   SpringBatch() = default;
   // The springs among elements whose nodes both have a DOF
-  // (dof_of_node[node] >= 0, the first of its three), in elements' order.
+  // (dof_of_node[node] >= 0, the first of its three), in elements' order,
+  // each taken from its lower node (a) to its higher (b): the force is the
+  // same either way, and springs in node order then share a in runs.
   SpringBatch(const std::vector<SpringElement>& elements, const std::vector<int>& dof_of_node);
 
   int size() const { return static_cast<int>(a_.size()); }
